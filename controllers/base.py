@@ -1,0 +1,17 @@
+"""The controller interface every controller of the project implements."""
+from __future__ import annotations
+
+from typing import Mapping, Protocol
+
+
+class Controller(Protocol):
+    """Runs once per control period (1 ms) on measured channels only.
+
+    `obs` holds the rig's measured channels at time t (recordings.md names and units,
+    references included); the return value maps command channels (`voltage_cmd`,
+    `shoulder_torque_cmd`, ...) to values before the rig's saturation and converters.
+    """
+
+    def reset(self) -> None: ...
+
+    def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]: ...

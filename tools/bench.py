@@ -1,0 +1,475 @@
+"""Benchmark the simulator: cost of our 1 ms control loop against bare mj_step, and cost vs segment count.
+
+Usage: python tools/bench.py [--quick] [--profile SCENARIO] [...]
+
+1. Scenarios (every scenarios/*.toml): simulated time, wall time of the control loop
+   (SimResult.wall_time_s, best of --repeats), real-time factor, and the cost per physics
+   step of our full loop (sensors, controller, recording, divergence check) against bare
+   `mujoco.mj_step(m, d, nstep=...)` on the same compiled model (same payload, locks, tilt,
+   timestep), the same number of steps, from the same initial state (keyframe, settled air
+   bearings), stepped in chunks. The project's target is ours/bare <= 1.3.
+2. Segment sweep: each rig rebuilt by `BUILDERS` with `n_segments` = N (nominal model, no
+   locks, no payload), bare mj_step per step and real-time factor at the rig's timestep.
+3. Optional (--profile): a cProfile breakdown of the control loop in us per control tick.
+
+Every timing is run --repeats times (default 3) and the best is reported. The default run
+takes well under 2 minutes on 2 cores; --quick caps scenarios at 1 s simulated and the sweep
+at a few hundred steps.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import dataclasses
+import datetime
+import os
+import platform
+import pstats
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from watflex_sim import engine  # noqa: E402
+from watflex_sim.build import BUILDERS  # noqa: E402
+from watflex_sim.model import load_model  # noqa: E402
+from watflex_sim.params import CONTROL_PERIOD, RIGS  # noqa: E402
+from watflex_sim.scenario import available, load_scenario  # noqa: E402
+
+TARGET_RATIO = 1.3  # ours / bare mj_step per physics step, the project's stated target
+DEFAULT_SEGMENTS = (5, 11, 21, 41)
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def table(headers: list[str], rows: list[list[str]], align: str | None = None) -> str:
+    """A markdown table; `align` is one char per column, 'l' or 'r' (default: first l, rest r)."""
+    align = align or "l" + "r" * (len(headers) - 1)
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
+
+    def line(cells):
+        return "| " + " | ".join(c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align)) + " |"
+
+    rule = "|" + "|".join(("-" * (w + 1) + ":") if a == "r" else (":" + "-" * (w + 1)) for w, a in zip(widths, align)) + "|"
+    return "\n".join([line(headers), rule, *(line(r) for r in rows)])
+
+
+def cpu_model() -> str:
+    try:
+        for text in Path("/proc/cpuinfo").read_text().splitlines():
+            if text.startswith("model name"):
+                return text.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def cpu_busy(seconds: float = 0.5) -> float | None:
+    """Share (0..1) of all CPUs busy over `seconds` before the run (Linux /proc/stat), None elsewhere."""
+
+    def sample():
+        fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+        idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+        return sum(fields), idle
+
+    try:
+        total0, idle0 = sample()
+        time.sleep(seconds)
+        total1, idle1 = sample()
+    except (OSError, ValueError, IndexError):
+        return None
+    return 1.0 - (idle1 - idle0) / max(total1 - total0, 1)
+
+
+def header(args) -> str:
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:
+        affinity = os.cpu_count()
+    load = " / ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
+    busy = cpu_busy()
+    lines = [
+        "# watflex-sim benchmark",
+        "",
+        f"- date: {datetime.datetime.now().isoformat(timespec='seconds')}",
+        f"- CPUs: os.cpu_count() = {os.cpu_count()}, usable by this process = {affinity} ({cpu_model()})",
+        f"- load average (1/5/15 min): {load}; CPUs busy just before the run: "
+        + ("n/a" if busy is None else f"{busy * 100:.0f} %")
+        + ("  <- other processes are running: timings are noisy, compare the spread column" if busy and busy > 0.1 else ""),
+        f"- mujoco {mujoco.__version__}, numpy {np.__version__}, Python {platform.python_version()} on {platform.platform()}",
+        f"- OPENBLAS_CORETYPE = {os.environ.get('OPENBLAS_CORETYPE', '(unset)')}",
+        f"- control period {CONTROL_PERIOD * 1e3:g} ms; every timing best of {args.repeats}; "
+        f"bare mj_step in chunks of {args.chunk} steps" + ("; QUICK run" if args.quick else ""),
+    ]
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- timing
+
+
+def initial_state(scenario: dict) -> tuple[mujoco.MjModel, mujoco.MjData, int]:
+    """The compiled model, the state the control loop starts from, and the substeps per tick.
+
+    Uses the engine's own setup (ControlLoop) when there is one, so the state is exactly the
+    loop's; otherwise repeats it: load_model with the scenario's options, keyframe 0,
+    mj_forward, settled air bearings.
+    """
+    if hasattr(engine, "ControlLoop"):
+        loop = engine.ControlLoop(scenario)
+        return loop.model, loop.data, loop.n_sub
+    model = load_model(
+        scenario["rig"],
+        payload_kg=scenario["payload_kg"],
+        locked_joints=scenario["locked_joints"],
+        tilt_rad=scenario["tilt_rad"],
+        tilt_azimuth_rad=scenario["tilt_azimuth_rad"],
+        timestep=scenario["timestep"] or None,
+    )
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    mujoco.mj_forward(model, data)
+    settle = getattr(engine, "_settle_bearings", None)
+    if settle is not None:
+        settle(model, data)
+    return model, data, engine.substeps(CONTROL_PERIOD, model.opt.timestep)
+
+
+def time_bare(model: mujoco.MjModel, start: mujoco.MjData, n_steps: int, chunk: int) -> tuple[float, float, bool]:
+    """Wall and CPU seconds of n_steps bare mj_step from a copy of `start` (ctrl as in `start`), and whether it stayed sane."""
+    data = mujoco.MjData(model)
+    mujoco.mj_copyData(data, model, start)
+    full, rest = divmod(n_steps, chunk)
+    c0, t0 = time.process_time(), time.perf_counter()
+    for _ in range(full):
+        mujoco.mj_step(model, data, nstep=chunk)
+    if rest:
+        mujoco.mj_step(model, data, nstep=rest)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    ok = not data.warning.number.any() and bool(np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
+    return wall, cpu, ok
+
+
+def scenario_list(args) -> list[str]:
+    names = args.scenarios or available()
+    unknown = set(names) - set(available())
+    if unknown:
+        sys.exit(f"bench: unknown scenario(s) {', '.join(sorted(unknown))} (known: {', '.join(available())})")
+    return names
+
+
+def load(name: str, cap_s: float | None) -> dict:
+    scenario = load_scenario(name)
+    if cap_s is not None and scenario["duration_s"] > cap_s:
+        scenario = load_scenario(name, [f"duration_s={cap_s!r}"])
+    return scenario
+
+
+def time_ours(scenario: dict, n_ticks: int):
+    """One run of the control loop: (wall s = SimResult.wall_time_s, CPU s per tick, SimResult).
+
+    CPU time comes from the progress callback (called after tick 0, every 0.1 s and at the end),
+    so it covers the loop only, less its first tick, and excludes time the OS gave other processes.
+    """
+    marks = []
+    result = engine.simulate(scenario, progress=lambda f: marks.append((f, time.process_time())))
+    (f0, c0), (f1, c1) = marks[0], marks[-1]
+
+    def done(f):  # ticks finished when progress(f) is called: f = k / n after tick k, 1.0 at the end
+        return n_ticks if f >= 1.0 else f * n_ticks + 1
+
+    ticks = done(f1) - done(f0)
+    return result.wall_time_s, (c1 - c0) / ticks if ticks > 0 else float("nan"), result
+
+
+# Recorded command channel that holds each actuator's ctrl value (rigs.py: the rigs write the
+# saturated/quantised command they record into data.ctrl).
+CTRL_CHANNEL = {"motor": "voltage_cmd", "shoulder_motor": "shoulder_torque_cmd", "elbow_motor": "elbow_torque_cmd"}
+
+
+def recorded_ctrl(model: mujoco.MjModel, result) -> np.ndarray | None:
+    """(n_ticks, nu) ctrl the loop applied, from its recording; None if a channel is missing."""
+    channels = result.recording.channels
+    columns = []
+    for i in range(model.nu):
+        channel = CTRL_CHANNEL.get(model.actuator(i).name)
+        if channel not in channels:
+            return None
+        columns.append(np.asarray(channels[channel], dtype=float))
+    return np.stack(columns, axis=1) if columns else np.zeros((len(result.recording.time), 0))
+
+
+def time_replay(model: mujoco.MjModel, start: mujoco.MjData, ctrl: np.ndarray, n_sub: int) -> float:
+    """Wall seconds of mj_step(nstep=n_sub) per tick with the loop's recorded ctrl set before each tick.
+
+    MuJoCo is deterministic, so this is the loop's own trajectory (same contacts, same solver
+    work) without the Python of sensors, controller and recording.
+    """
+    data = mujoco.MjData(model)
+    mujoco.mj_copyData(data, model, start)
+    view = data.ctrl
+    t0 = time.perf_counter()
+    for u in ctrl:
+        view[:] = u
+        mujoco.mj_step(model, data, nstep=n_sub)
+    return time.perf_counter() - t0
+
+
+def solver_iterations(model: mujoco.MjModel, start: mujoco.MjData, ctrl: np.ndarray | None, n_sub: int, n_ticks: int) -> float:
+    """Mean constraint-solver iterations per physics step (untimed), with `ctrl` per tick or ctrl held."""
+    data = mujoco.MjData(model)
+    mujoco.mj_copyData(data, model, start)
+    total = 0
+    for k in range(n_ticks):
+        if ctrl is not None:
+            data.ctrl[:] = ctrl[k]
+        for _ in range(n_sub):
+            mujoco.mj_step(model, data)
+            total += int(data.solver_niter[: max(int(data.nisland), 1)].sum())
+    return total / (n_ticks * n_sub)
+
+
+def bench_scenarios(args) -> str:
+    rows_cost, rows_time, rows_physics, verdicts, n_met = [], [], [], [], 0
+    for name in scenario_list(args):
+        scenario = load(name, args.max_duration)
+        model, start, n_sub = initial_state(scenario)
+        n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
+        n_steps = n_ticks * n_sub
+        ours, ours_cpu, bare, bare_cpu, replay = [], [], [], [], []
+        bare_ok, error, ctrl = True, None, None
+        for _ in range(args.repeats):  # interleaved, so slow drifts of the machine hit all alike
+            try:
+                wall, cpu_tick, result = time_ours(scenario, n_ticks)
+                ours.append(wall)
+                ours_cpu.append(cpu_tick)
+                if ctrl is None:
+                    ctrl = recorded_ctrl(model, result)
+            except Exception as exc:  # noqa: BLE001 - a diverging scenario is reported, not fatal
+                error = f"{type(exc).__name__}: {exc}"
+            wall, cpu, ok = time_bare(model, start, n_steps, args.chunk)
+            bare.append(wall)
+            bare_cpu.append(cpu)
+            bare_ok &= ok
+            if ctrl is not None:
+                replay.append(time_replay(model, start, ctrl, n_sub))
+        sim_s = n_ticks * CONTROL_PERIOD
+        bare_us = min(bare) / n_steps * 1e6
+        flag = "" if bare_ok else " (bare diverged)"
+        if not ours:
+            rows_time.append([name, scenario["rig"], f"{sim_s:.3f}", "failed", "-", f"{n_ticks}", f"{n_steps}",
+                              f"{model.opt.timestep * 1e3:g}", f"{n_sub}", f"{model.nv}", "-"])
+            rows_cost.append([name, "-", f"{bare_us:.2f}{flag}", "-", "-", "-", "-", "-"])
+            verdicts.append(f"- {name}: loop failed: {error}")
+            continue
+        wall = min(ours)
+        ours_us = wall / n_steps * 1e6
+        ratio = ours_us / bare_us
+        cpu_ratio = min(ours_cpu) / n_sub / (min(bare_cpu) / n_steps) if min(bare_cpu) > 0 else float("nan")
+        overhead_tick = (ours_us - bare_us) * n_sub
+        budget_tick = (TARGET_RATIO - 1.0) * bare_us * n_sub
+        met = ratio <= TARGET_RATIO
+        n_met += met
+        spread = (max(ours) - wall) / wall * 100
+        rows_time.append([
+            name, scenario["rig"], f"{sim_s:.3f}", f"{wall:.3f}", f"{sim_s / wall:.1f}", f"{n_ticks}",
+            f"{n_steps}", f"{model.opt.timestep * 1e3:g}", f"{n_sub}", f"{model.nv}", f"{spread:.0f}",
+        ])
+        rows_cost.append([
+            name, f"{ours_us:.2f}", f"{bare_us:.2f}{flag}", f"{ratio:.2f}", "yes" if met else "NO",
+            f"{cpu_ratio:.2f}", f"{overhead_tick:.1f}", f"{budget_tick:.1f}",
+        ])
+        if replay:
+            replay_us = min(replay) / n_steps * 1e6
+            it_loop = solver_iterations(model, start, ctrl, n_sub, n_ticks)
+            it_bare = solver_iterations(model, start, None, n_sub, n_ticks)
+            rows_physics.append([
+                name, f"{bare_us:.2f}", f"{replay_us:.2f}", f"{replay_us / bare_us:.2f}", f"{ours_us / replay_us:.2f}",
+                f"{(ours_us - replay_us) * n_sub:.1f}", f"{it_bare:.3f}", f"{it_loop:.3f}",
+            ])
+        verdicts.append(
+            f"- {name}: ours/bare = {ratio:.2f} -> target <= {TARGET_RATIO} {'met' if met else 'NOT met'}"
+            + ("" if met else f" (overhead {overhead_tick:.1f} us/tick, budget {budget_tick:.1f} us/tick)")
+        )
+    out = [
+        "## 1. Scenarios: our control loop vs bare mj_step",
+        "",
+        table(
+            ["scenario", "rig", "simulated (s)", "loop wall (s)", "real-time factor", "ticks", "physics steps",
+             "dt (ms)", "steps/tick", "nv", f"spread of {args.repeats} (%)"],
+            rows_time,
+        ),
+        "",
+        table(
+            ["scenario", "ours (us/step)", "bare mj_step (us/step)", "ours/bare", f"<= {TARGET_RATIO}",
+             "ours/bare, CPU time", "overhead (us/tick)", f"budget at {TARGET_RATIO} (us/tick)"],
+            rows_cost,
+        ),
+        "",
+        f"Target (project): ours/bare <= {TARGET_RATIO} per physics step. Met for {n_met} of {len(verdicts)} scenarios:",
+        *verdicts,
+        "",
+        "ours = loop wall (SimResult.wall_time_s) / physics steps: sensors, noise, controller, actuators,",
+        "recording, frames, divergence check and mj_step. bare = mj_step(m, d, nstep=chunk) on the same model",
+        "from the same initial state, ctrl held at its initial value (0). overhead = (ours - bare) x steps/tick;",
+        "budget = the overhead per tick the target allows. spread = (worst - best) / best of our loop's wall",
+        "times. The CPU-time ratio (process_time; ours from the progress callback) is a cross-check that",
+        "ignores time the OS gave to other processes; the verdict uses wall time.",
+    ]
+    if rows_physics:
+        out += [
+            "",
+            "### Where the ratio comes from: physics of the moving arm vs Python",
+            "",
+            table(
+                ["scenario", "bare at rest (us/step)", "replay (us/step)", "replay/bare", "ours/replay",
+                 "non-physics (us/tick)", "solver it/step, bare", "solver it/step, loop"],
+                rows_physics,
+            ),
+            "",
+            "replay = the loop's recorded ctrl written into data.ctrl before each tick's mj_step(nstep=steps/tick):",
+            "bit-for-bit the loop's own trajectory without its Python. replay/bare = extra physics cost of the",
+            "moving arm (e.g. constraint-solver iterations: the bare run from rest converges at once);",
+            "ours/replay and non-physics (us/tick) = the loop's own overhead (its Python, and any MuJoCo call",
+            "besides the physics steps such as a position refresh). ours/bare = replay/bare x ours/replay.",
+        ]
+    return "\n".join(out)
+
+
+def bench_segments(args) -> str:
+    rows = []
+    settle = getattr(engine, "_settle_bearings", None)
+    for rig, build in BUILDERS.items():
+        base = RIGS[rig]
+        for n in args.segments:
+            params = dataclasses.replace(base, n_segments=n)
+            t0 = time.perf_counter()
+            model = build(params).compile()
+            compile_s = time.perf_counter() - t0
+            start = mujoco.MjData(model)
+            if model.nkey:
+                mujoco.mj_resetDataKeyframe(model, start, 0)
+            mujoco.mj_forward(model, start)
+            if settle is not None:
+                settle(model, start)  # air bearings resting on the glass, as at a loop's start
+            walls, ok = [], True
+            for _ in range(args.repeats):
+                wall, _cpu, good = time_bare(model, start, args.sweep_steps, args.chunk)
+                walls.append(wall)
+                ok &= good
+            per_step = min(walls) / args.sweep_steps
+            dt = model.opt.timestep
+            rows.append([
+                rig, f"{n}", f"{model.nv}", f"{model.nbody}", f"{dt * 1e3:g}", f"{per_step * 1e6:.2f}",
+                f"{dt / per_step:.1f}", f"{per_step * 1e6 * round(CONTROL_PERIOD / dt):.1f}",
+                f"{compile_s * 1e3:.0f}", "ok" if ok else "DIVERGED",
+            ])
+    out = [
+        "## 2. Cost vs segment count (bare mj_step, nominal model: no locks, no payload)",
+        "",
+        table(
+            ["rig", "N segments", "nv", "bodies", "dt (ms)", "mj_step (us/step)", "real-time factor",
+             "physics per 1 ms tick (us)", "build+compile (ms)", "state"],
+            rows,
+        ),
+        "",
+        f"{args.sweep_steps} steps from keyframe 0 (bearings settled), ctrl = 0; real-time factor = dt / wall per step.",
+        "The laser arm's N is its one beam; the Watflex's N is per link (both links).",
+    ]
+    return "\n".join(out)
+
+
+def profile(name: str, args) -> str:
+    """cProfile of one run of the scenario's loop: tottime and cumtime per control tick (us)."""
+    scenario = load(name, args.max_duration)
+    engine.simulate(scenario)  # warm-up
+    n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
+    plain = min(engine.simulate(scenario).wall_time_s for _ in range(args.repeats))
+    prof = cProfile.Profile()
+
+    def gate(fraction):  # progress: first call after tick 0, last after the loop -> profile the loop only
+        if fraction >= 1.0:
+            prof.disable()
+        elif not gate.on:
+            gate.on = True
+            prof.enable()
+
+    gate.on = False
+    result = engine.simulate(scenario, progress=gate)
+    prof.disable()
+    n_ticks -= 1  # tick 0 ran before the profiler started
+    stats = pstats.Stats(prof).stats
+    rows = []
+    for (path, line, func), (_cc, ncalls, tottime, cumtime, _callers) in stats.items():
+        where = f"{Path(path).name}:{line}" if line else "built-in"
+        rows.append((tottime, cumtime, ncalls, f"{where} {func}"))
+    rows.sort(reverse=True)
+    body = [
+        [f"{tt / n_ticks * 1e6:.2f}", f"{ct / n_ticks * 1e6:.2f}", f"{nc / n_ticks:.2f}", where]
+        for tt, ct, nc, where in rows[: args.profile_top]
+    ]
+    rest = result.wall_time_s - sum(r[0] for r in rows)  # simulate's own frame was entered before profiling
+    body.append([f"{rest / n_ticks * 1e6:.2f}", "", "", "simulate's loop body (recording rows, loop), by difference"])
+    out = [
+        f"## cProfile of the {name} control loop (ticks 1..{n_ticks}, setup excluded)",
+        "",
+        f"Loop wall: {plain / (n_ticks + 1) * 1e6:.1f} us/tick without the profiler (best of {args.repeats}), "
+        f"{result.wall_time_s / (n_ticks + 1) * 1e6:.1f} us/tick under cProfile. The profiler inflates",
+        "every Python-level call (C calls such as mj_step much less): read the relative sizes.",
+        "",
+        table(["tottime (us/tick)", "cumtime (us/tick)", "calls/tick", "function"], body, "rrrl"),
+    ]
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 2)[2],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--quick", action="store_true",
+                        help="short run: scenarios capped at 1 s simulated, sweep of 500 steps (a few seconds)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of every timing; the best is reported (default 3)")
+    parser.add_argument("--chunk", type=int, default=1000, help="physics steps per bare mj_step(nstep=...) call (default 1000)")
+    parser.add_argument("--scenarios", nargs="+", metavar="NAME", help=f"scenarios to run (default: all of {', '.join(available())})")
+    parser.add_argument("--max-duration", type=float, metavar="S",
+                        help="cap each scenario's simulated duration (s); --quick sets 1")
+    parser.add_argument("--segments", type=int, nargs="+", default=list(DEFAULT_SEGMENTS), metavar="N",
+                        help=f"segment counts of the sweep (default {' '.join(map(str, DEFAULT_SEGMENTS))})")
+    parser.add_argument("--sweep-steps", type=int, metavar="STEPS",
+                        help="physics steps per sweep timing (default 5000; 500 with --quick)")
+    parser.add_argument("--no-scenarios", action="store_true", help="skip section 1")
+    parser.add_argument("--no-sweep", action="store_true", help="skip section 2")
+    parser.add_argument("--profile", nargs="*", metavar="SCENARIO",
+                        help="add a cProfile breakdown (us per control tick) of these scenarios "
+                             "(no name: laser_arm_step)")
+    parser.add_argument("--profile-top", type=int, default=25, help="rows of each profile (default 25)")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.chunk < 1:
+        parser.error("--repeats and --chunk must be >= 1")
+    if args.quick and args.max_duration is None:
+        args.max_duration = 1.0
+    if args.sweep_steps is None:
+        args.sweep_steps = 500 if args.quick else 5000
+    if args.profile is not None and not args.profile:
+        args.profile = ["laser_arm_step"]
+
+    t0 = time.perf_counter()
+    print(header(args), flush=True)
+    if not args.no_scenarios:
+        print("\n" + bench_scenarios(args), flush=True)
+    if not args.no_sweep:
+        print("\n" + bench_segments(args), flush=True)
+    for name in args.profile or ():
+        print("\n" + profile(name, args), flush=True)
+    print(f"\nbenchmark took {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,48 @@
+"""Closed forms of Euler-Bernoulli beam theory that the models are checked against."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+
+def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3) -> np.ndarray:
+    """First `n_modes` natural frequencies (rad/s) of a clamped-free beam with a tip point mass.
+
+    Frequency equation (e.g. Blevins, *Formulas for natural frequency and mode shape*, table 8-1;
+    Laura et al. 1974): 1 + cos(l) cosh(l) + mu l (cos(l) sinh(l) - sin(l) cosh(l)) = 0 with
+    mu = m_tip / (rho L), and omega = l^2 sqrt(EI / (rho L^4)). Rotary inertia of the tip mass
+    is neglected.
+    """
+    mu = tip_mass / (beam.mass_per_length * beam.length)
+
+    def f(lam: float) -> float:
+        c, s, ch, sh = math.cos(lam), math.sin(lam), math.cosh(lam), math.sinh(lam)
+        # divided by cosh to keep the function O(1) for large lambda
+        return (1.0 + c * ch + mu * lam * (c * sh - s * ch)) / ch
+
+    roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
+    values = [f(x) for x in grid]
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if fa * fb < 0:
+            roots.append(brentq(f, a, b, xtol=1e-14))
+            if len(roots) == n_modes:
+                break
+    lam = np.array(roots)
+    return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
+
+
+def tip_deflection(beam, force: float) -> float:
+    """Static tip deflection (m) of a clamped-free beam under a tip force (N): F L^3 / (3 EI)."""
+    return force * beam.length**3 / (3.0 * beam.EI)
+
+
+def gauge_strain(beam, x_gauge: float, tip_deflection_m: float) -> float:
+    """Surface strain at `x_gauge` (m from the root) for a tip deflection (m), thesis eq. 3.3.
+
+    eps = 3 t / (2 l^3) (x_s - l) w: negative on the side that is stretched when the beam
+    bends towards positive w (rigs.md: eps = -(t/2) w'').
+    """
+    t, L = beam.thickness, beam.length
+    return 3.0 * t / (2.0 * L**3) * (x_gauge - L) * tip_deflection_m

@@ -1,0 +1,180 @@
+"""Build both rigs' MuJoCo models from `params.py` with `mujoco.MjSpec`.
+
+Flexible beams are "rigid finite element" chains: a beam of length L is cut into N elements
+of length dx = L/N; a hinge with stiffness k = EI/dx and damping c = beta k sits at the middle
+of each element, so the rigid bodies are a half segment at the root (part of the parent),
+N-1 full segments and a half segment at the tip. README "Discretisation" gives the
+convergence of this scheme against the analytic beam.
+"""
+from __future__ import annotations
+
+import math
+
+import mujoco
+
+from .params import GRAVITY, LaserArm, Watflex
+
+BEAM_RGBA = [0.75, 0.78, 0.82, 1]
+RIGID_RGBA = [0.3, 0.3, 0.35, 1]
+MASS_RGBA = [0.8, 0.3, 0.2, 1]
+
+
+def _spec(name: str, timestep: float) -> mujoco.MjSpec:
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.degree = False  # angles in radians
+    spec.compiler.autolimits = True
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.gravity = [0, 0, -GRAVITY]
+    spec.visual.global_.offwidth = 1280
+    spec.visual.global_.offheight = 720
+    return spec
+
+
+def _box(body, name, x0, length, thickness, height, mass, rgba):
+    """A box geom from x0 to x0+length along the body's x axis, with the given mass (kg)."""
+    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX)
+    g.pos = [x0 + length / 2, 0, 0]
+    g.size = [length / 2, thickness / 2, height / 2]
+    g.mass = mass
+    g.rgba = rgba
+    g.contype = g.conaffinity = 0
+    return g
+
+
+def _rigid_bar(body, name, x0, length, width=0.02):
+    """A massless drawing of a rigid offset (clamps, axes) along the body's x axis."""
+    g = _box(body, name, x0, length, width, width, 0.0, RIGID_RGBA)
+    g.group = 1
+    return g
+
+
+def add_flexible_chain(parent, prefix: str, beam, n_segments: int, x0: float):
+    """Attach a flexible beam along the parent's x axis from x0 (m); return the tip body.
+
+    Joints are named `{prefix}_j01..`, bodies `{prefix}_seg01..`; each hinge bends about z
+    with stiffness EI/dx (N m/rad) and damping beta*EI/dx (N m s/rad).
+    """
+    dx = beam.length / n_segments
+    k = beam.EI / dx
+    mass = beam.mass_per_length * dx
+    _box(parent, f"{prefix}_seg00", x0, dx / 2, beam.thickness, beam.height, mass / 2, BEAM_RGBA)
+    body, pos = parent, [x0 + dx / 2, 0, 0]
+    for i in range(1, n_segments + 1):
+        body = body.add_body(name=f"{prefix}_seg{i:02d}", pos=pos)
+        j = body.add_joint(name=f"{prefix}_j{i:02d}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+        j.stiffness = [k, 0, 0]  # N m/rad (linear term only)
+        j.damping = [beam.damping_beta * k, 0, 0]  # N m s/rad
+        length = dx if i < n_segments else dx / 2
+        _box(body, f"{prefix}_seg{i:02d}", 0.0, length, beam.thickness, beam.height, beam.mass_per_length * length, BEAM_RGBA)
+        pos = [dx, 0, 0]
+    return body
+
+
+def chain_tip_x(beam, n_segments: int) -> float:
+    """x (m) of the beam's free end in the frame of the chain's last body."""
+    return beam.length / n_segments / 2
+
+
+def build_laser_arm(p: LaserArm) -> mujoco.MjSpec:
+    """The laser arm: hub + reflected motor, flexible beam, tip sensor mass, voltage drive."""
+    spec = _spec("laser_arm", p.timestep)
+    spec.worldbody.add_light(name="top", pos=[0.5, 0, 3], dir=[0, 0, -1])
+    hub = spec.worldbody.add_body(name="hub_body", pos=[0, 0, 0.1])
+    joint = hub.add_joint(name="hub", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+    joint.armature = p.reflected_motor_inertia  # N^2 J_e, kg m^2
+    joint.damping = [p.hub_viscous, 0, 0]  # N m s/rad (linear term only)
+    # Hub: a cylinder about z whose inertia m r^2 / 2 is the derived J_hub.
+    radius = 0.05
+    g = hub.add_geom(name="hub", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius, 0.03, 0])
+    g.mass = 2 * p.hub_inertia / radius**2
+    g.rgba = RIGID_RGBA
+    g.contype = g.conaffinity = 0
+    tip = add_flexible_chain(hub, "beam", p.beam, p.n_segments, 0.0)
+    x_tip = chain_tip_x(p.beam, p.n_segments)
+    s = tip.add_geom(name="tip_sensor", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.015, 0, 0], pos=[x_tip, 0, 0])
+    s.mass = p.tip_sensor_mass
+    s.rgba = MASS_RGBA
+    s.contype = s.conaffinity = 0
+    tip.add_site(name="tip", pos=[x_tip, 0, 0], size=[0.005, 0, 0])
+    tip.add_site(name="payload", pos=[x_tip, 0, 0], size=[0.005, 0, 0])
+    # Voltage drive: tau = eta N K_T clip((u - K_E w)/R, +-i_max) (rigs.md §1, paper eq. 17-18)
+    # as gain*u + bias*w with the force range at the current limit.
+    motor = spec.add_actuator(name="motor", target="hub", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    motor.gainprm[0] = p.torque_per_amp / p.resistance  # N m/V
+    motor.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+    motor.biasprm[2] = -p.torque_per_amp * p.back_emf / p.resistance  # N m s/rad
+    motor.forcerange = [-p.torque_per_amp * p.current_limit, p.torque_per_amp * p.current_limit]
+    motor.ctrlrange = [-p.voltage_limit, p.voltage_limit]
+    spec.add_key(name="home")
+    return spec
+
+
+def _bearing(body, name: str, mass: float, p: Watflex):
+    """An air-bearing puck carrying a point mass (kg): vertical slide joint, frictionless contact sphere."""
+    body.add_joint(name=f"{name}_float", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+    g = body.add_geom(name=f"{name}_bearing", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[p.bearing_radius, 0, 0])
+    g.mass = 0.0
+    g.rgba = MASS_RGBA
+    g.contype, g.conaffinity, g.condim = 1, 0, 1
+    g.solref = [p.bearing_timeconst, 1.0]
+    g.friction = [0, 0, 0]
+    # rigs.md §2 [choice: point mass]: a 1 mm sphere, rotary inertia 4e-7 kg m^2 per kg
+    m = body.add_geom(name=f"{name}_mass", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[1e-3, 0, 0])
+    m.mass = mass
+    m.contype = m.conaffinity = 0
+    m.group = 3
+
+
+def build_watflex(p: Watflex) -> mujoco.MjSpec:
+    """Watflex: shoulder fixed to the table, two flexible links, elbow and end effector on air bearings."""
+    spec = _spec("watflex", p.timestep)
+    # Two frictionless contacts are the only constraints: PGS gives Newton's answer (to 1e-17 in
+    # the scenarios) for 30-40 % less time per step (tools/bench.py).
+    spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
+    spec.worldbody.add_light(name="top", pos=[0.6, 0, 3], dir=[0, 0, -1])
+    glass = spec.worldbody.add_geom(name="glass", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2, 2, 0.01])
+    glass.rgba = [0.6, 0.75, 0.85, 1]
+    glass.contype, glass.conaffinity, glass.condim = 0, 1, 1
+    glass.friction = [0, 0, 0]
+    z = p.bearing_radius  # arm plane height: the bearing spheres rest on the glass
+
+    shoulder = spec.worldbody.add_body(name="shoulder_body", pos=[0, 0, z])
+    j = shoulder.add_joint(name="shoulder", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+    j.armature = p.shoulder.inertia  # kg m^2 at the output, thesis 4.5.6
+    _rigid_bar(shoulder, "link1_root_clamp", 0.0, p.l1a)
+    tip1 = add_flexible_chain(shoulder, "link1", p.link1, p.n_segments, p.l1a)
+    x1 = chain_tip_x(p.link1, p.n_segments)
+    _rigid_bar(tip1, "link1_end_clamp", x1, p.l1c)
+
+    elbow_housing = tip1.add_body(name="elbow_housing", pos=[x1 + p.l1c, 0, 0])
+    _bearing(elbow_housing, "elbow", p.elbow.mass, p)
+    link2 = elbow_housing.add_body(name="link2_root")
+    j = link2.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+    j.armature = p.elbow.inertia  # kg m^2 at the output, thesis 4.5.6
+    _rigid_bar(link2, "link2_root_clamp", 0.0, p.l2a)
+    tip2 = add_flexible_chain(link2, "link2", p.link2, p.n_segments, p.l2a)
+    x2 = chain_tip_x(p.link2, p.n_segments)
+    _rigid_bar(tip2, "link2_end_clamp", x2, p.l2c)
+    ee = tip2.add_body(name="end_effector", pos=[x2 + p.l2c, 0, 0])
+    _bearing(ee, "end_effector", p.end_effector_mass, p)
+    ee.add_site(name="tip", size=[0.01, 0, 0])
+
+    for name, (link, x_gauge, _k) in p.gauges.items():
+        beam = p.link1 if link == 1 else p.link2
+        dx = beam.length / p.n_segments
+        # body holding x_gauge: the root stub (before the first hinge) or segment i
+        i = min(int(math.floor(x_gauge / dx + 0.5)), p.n_segments)
+        body = spec.body(f"link{link}_seg{i:02d}") if i > 0 else (shoulder if link == 1 else link2)
+        x_local = x_gauge - (i - 0.5) * dx if i > 0 else (p.l1a if link == 1 else p.l2a) + x_gauge
+        body.add_site(name=f"strain_{name}", pos=[x_local, 0, 0], size=[0.004, 0, 0], rgba=[1, 1, 0, 1])
+
+    for name, act in (("shoulder", p.shoulder), ("elbow", p.elbow)):
+        motor = spec.add_actuator(name=f"{name}_motor", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        motor.ctrlrange = [-act.torque_limit, act.torque_limit]  # N m, converter range
+    spec.add_key(name="home")
+    return spec
+
+
+BUILDERS = {"laser_arm": build_laser_arm, "watflex": build_watflex}

@@ -1,0 +1,157 @@
+"""`watflex-sim`: run scenarios headless or in the viewer, plot and log recordings."""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .engine import SimulationError, simulate
+from .model import ConfigError
+from .recording import Recording, RecordingError, read_recording, write_recording
+from .scenario import available, load_scenario
+
+EXIT_BAD_INPUT = 2
+EXIT_DIVERGED = 3
+
+
+class ProgressBar:
+    """A one-line text progress bar with ETA on stderr (only when stderr is a terminal or forced)."""
+
+    def __init__(self, label: str, enabled: bool):
+        self.label, self.enabled, self.start = label, enabled, time.perf_counter()
+
+    def __call__(self, fraction: float) -> None:
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        eta = elapsed * (1 - fraction) / fraction if fraction > 0 else float("nan")
+        bar = "#" * int(30 * fraction)
+        end = "\n" if fraction >= 1 else ""
+        sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * fraction:5.1f} %  ETA {eta:5.1f} s{end}")
+        sys.stderr.flush()
+
+
+def _add_scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", help=f"scenario name ({', '.join(available())}) or path to a .toml file")
+    p.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a scenario parameter, e.g. --set payload_kg=0.7 (kg) --set direction=negative "
+        "--set controller.kp=0.2 --set seed=3 --set noise=false; repeatable",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="watflex-sim",
+        description="MuJoCo simulator of the Watflex two-link and the laser-guided flexible arms "
+        "(shared/spec/rigs.md). Recordings follow shared/spec/recordings.md.",
+    )
+    parser.add_argument("--version", action="version", version=f"watflex-sim {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress of the library")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="simulate a scenario headless; write NAME.csv/.json, a PNG plot and a .rrd")
+    _add_scenario_args(run)
+    run.add_argument("--out", required=True, type=Path, help="output directory (created if missing)")
+    run.add_argument("--rrd", type=Path, help="rerun recording path (default OUT/NAME.rrd)")
+    run.add_argument("--no-rrd", action="store_true", help="do not write a rerun recording")
+    run.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
+    run.add_argument("--spawn", action="store_true", help="also open the rerun viewer (needs a display)")
+
+    view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)")
+    _add_scenario_args(view)
+
+    plot = sub.add_parser("plot", help="plot a recording (.csv + .json, or .mat + .json) to PNG and/or rerun")
+    plot.add_argument("recording", type=Path, help="NAME.csv or NAME.mat with NAME.json beside it")
+    plot.add_argument("--png", type=Path, help="PNG path (default NAME.png beside the recording)")
+    plot.add_argument("--rrd", type=Path, help="also write a rerun recording here")
+    plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
+
+    sub.add_parser("list", help="list the scenarios shipped in scenarios/")
+    return parser
+
+
+def _log_rerun(rec: Recording, rrd: Path | None, spawn: bool, frames=None, frame_time=None) -> None:
+    from .rerun_log import log_run
+
+    log_run(rec.time, rec.channels, rec.units(), rrd_path=rrd, spawn=spawn, frames=frames,
+            frame_time=frame_time, recording_name=rec.meta.get("experiment"))
+
+
+def cmd_run(args) -> int:
+    scenario = load_scenario(args.scenario, args.overrides)
+    name = scenario["name"]
+    bar = ProgressBar(name, sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
+    result = simulate(scenario, progress=bar)
+    rec = result.recording
+    csv_path = write_recording(rec, args.out, name)
+    print(f"wrote {csv_path} and {csv_path.with_suffix('.json').name} "
+          f"({rec.time.size} samples, {len(rec.channels)} channels, {result.wall_time_s:.2f} s wall, "
+          f"{rec.time[-1] / result.wall_time_s:.1f}x real time)")
+    if not args.no_plot:
+        from .plot import plot_recording
+
+        print(f"wrote {plot_recording(rec, args.out / f'{name}.png')}")
+    rrd = None if args.no_rrd else (args.rrd or args.out / f"{name}.rrd")
+    if rrd or args.spawn:
+        _log_rerun(rec, rrd, args.spawn, result.frames, result.frame_time)
+        if rrd:
+            print(f"wrote {rrd}  (open with: rerun {rrd})")
+    return 0
+
+
+def cmd_view(args) -> int:
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        print("watflex-sim: error: no display (DISPLAY is not set): the viewer needs one; "
+              "use 'watflex-sim run ... --rrd' headless", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    from .viewer import view
+
+    view(load_scenario(args.scenario, args.overrides))
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from .plot import plot_recording
+
+    rec = read_recording(args.recording)
+    png = args.png or args.recording.with_suffix(".png")
+    print(f"wrote {plot_recording(rec, png)}")
+    if args.rrd or args.spawn:
+        _log_rerun(rec, args.rrd, args.spawn)
+        if args.rrd:
+            print(f"wrote {args.rrd}")
+    return 0
+
+
+def cmd_list(args) -> int:
+    for name in available():
+        print(name)
+    return 0
+
+
+COMMANDS = {"run": cmd_run, "view": cmd_view, "plot": cmd_plot, "list": cmd_list}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
+    try:
+        return COMMANDS[args.command](args)
+    except (ConfigError, RecordingError) as exc:
+        print(f"watflex-sim: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SimulationError as exc:
+        print(f"watflex-sim: error: {exc}", file=sys.stderr)
+        return EXIT_DIVERGED
+    except KeyboardInterrupt:
+        print("watflex-sim: interrupted; nothing was written for the unfinished run", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,233 @@
+"""The 1 ms control loop: sensors -> controller -> actuators, zero-order hold over physics substeps."""
+from __future__ import annotations
+
+import logging
+import time as wallclock
+from dataclasses import dataclass
+from typing import Callable
+
+import mujoco
+import numpy as np
+
+from . import __version__
+from .model import ConfigError, load_model, rig_params
+from .params import CONTROL_PERIOD
+from .recording import FORMAT, Recording
+from .rigs import LaserArmRig, WatflexRig
+from .signals import make_signal
+
+log = logging.getLogger(__name__)
+
+RIG_CLASSES = {"laser_arm": LaserArmRig, "watflex": WatflexRig}
+
+
+class SimulationError(RuntimeError):
+    """MuJoCo warned or the state diverged; the message names the time and the cause."""
+
+
+@dataclass
+class SimResult:
+    recording: Recording
+    frames: np.ndarray  # (n_frames, n_points, 3) arm drawing points, m
+    frame_time: np.ndarray  # (n_frames,) s
+    wall_time_s: float
+
+
+def substeps(control_period: float, timestep: float) -> int:
+    """Physics steps per control period; ConfigError unless the period is a whole multiple."""
+    n = round(control_period / timestep)
+    if n < 1 or abs(n * timestep - control_period) > 1e-9 * control_period:
+        raise ConfigError(
+            f"control period {control_period * 1e3:g} ms is not a whole multiple of the physics step {timestep * 1e3:g} ms"
+        )
+    return n
+
+
+def make_controller(scenario: dict, rig_name: str):
+    """The scenario's controller: a registered closed-loop type, or open loop from its command signals."""
+    from controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
+
+    spec = dict(scenario["controller"])
+    kind = spec.pop("type")
+    sign = 1.0 if scenario["direction"] == "positive" else -1.0
+    if kind in ("none", "open_loop"):
+        return OpenLoop({c["channel"]: make_signal(c, sign) for c in scenario["command"]})
+    if kind not in CONTROLLERS:
+        raise ConfigError(f"unknown controller type {kind!r} (known: none, {', '.join(CONTROLLERS)})")
+    try:
+        return CONTROLLERS[kind](**spec)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"controller {kind!r}: {exc}") from None
+
+
+def _references(scenario: dict, rig_name: str) -> dict[str, Callable[[float], float]]:
+    """Reference signals by channel (rad); a laser-arm 'arc_m' step is converted by the beam length."""
+    sign = 1.0 if scenario["direction"] == "positive" else -1.0
+    params = rig_params(rig_name)
+    out = {}
+    for table in scenario["reference"]:
+        table = dict(table)
+        scale = 1.0
+        if "arc_m" in table:  # laser spot displacement along the tip's arc (m) -> rad
+            table["amplitude"], scale = table.pop("arc_m"), 1.0 / params.beam.length
+        out[table["channel"]] = make_signal(table, sign, scale)
+    return out
+
+
+_last_warning = [""]
+
+
+def _keep_warning(message: str) -> None:
+    """MuJoCo warning handler: keep the text for the error message (and write no MUJOCO_LOG.TXT)."""
+    _last_warning[0] = message.strip()
+
+
+mujoco.set_mju_user_warning(_keep_warning)
+
+
+MAX_QVEL = 1e4  # rad/s or m/s: beyond this a run is taken as diverged
+CHECK_EVERY = 10  # control periods between divergence checks (MuJoCo's warning counters persist)
+
+
+def _check_state(model: mujoco.MjModel, data: mujoco.MjData, t: float) -> None:
+    """Raise SimulationError if MuJoCo warned (bad qacc, full contact buffer, ...), the velocity
+    is not finite or exceeds MAX_QVEL; `t` (s) is the time the check is made."""
+    counts = data.warning.number
+    qvel = data.qvel
+    if not counts.any() and float(qvel @ qvel) < MAX_QVEL**2:  # NaN fails the comparison
+        return
+    if counts.any():
+        cause = mujoco.mjtWarning(int(np.flatnonzero(counts)[0])).name
+        raise SimulationError(
+            f"simulation diverged (detected at t = {t:.3f} s): MuJoCo warning {cause} ({_last_warning[0]}); "
+            f"try a smaller timestep or lower gains; nothing was written"
+        )
+    raise SimulationError(
+        f"simulation diverged (detected at t = {t:.3f} s): velocity not finite or above {MAX_QVEL:g}; "
+        f"try a smaller timestep or lower gains; nothing was written"
+    )
+
+
+def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float = 0.3) -> None:
+    """Let air-bearing slides sink onto the glass, then restore the planar pose at rest."""
+    slides = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE]
+    if not slides:
+        return
+    qpos0 = data.qpos.copy()
+    mujoco.mj_step(model, data, nstep=int(round(seconds / model.opt.timestep)))
+    keep = [model.jnt_qposadr[j] for j in slides]
+    settled = data.qpos[keep].copy()
+    data.qpos[:] = qpos0
+    data.qpos[keep] = settled
+    data.qvel[:] = 0
+    data.time = 0.0
+    mujoco.mj_forward(model, data)
+
+
+class ControlLoop:
+    """A scenario set up to run: model, data, rig, controller and references.
+
+    `tick(k)` does one 1 ms period at t = k ms: references -> sensors -> controller ->
+    saturation/converters -> `n_sub` physics steps with the command held (zero-order hold),
+    then the divergence check. Raises ConfigError for an impossible configuration.
+    """
+
+    def __init__(self, scenario: dict):
+        self.scenario = scenario
+        rig_name = scenario["rig"]
+        self.model = load_model(
+            rig_name,
+            payload_kg=scenario["payload_kg"],
+            locked_joints=scenario["locked_joints"],
+            tilt_rad=scenario["tilt_rad"],
+            tilt_azimuth_rad=scenario["tilt_azimuth_rad"],
+            timestep=scenario["timestep"] or None,
+        )
+        self.n_sub = substeps(CONTROL_PERIOD, self.model.opt.timestep)
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
+        mujoco.mj_forward(self.model, self.data)
+        _settle_bearings(self.model, self.data)
+        kwargs = {"locked": scenario["locked_joints"]} if rig_name == "watflex" else {}
+        self.rig = RIG_CLASSES[rig_name](
+            self.model, self.data, rig_params(rig_name), scenario["noise"], scenario["seed"], **kwargs
+        )
+        self.controller = make_controller(scenario, rig_name)
+        self.controller.reset()
+        references = _references(scenario, rig_name)
+        unknown = set(references) - {c for c in self.rig.channels if c.endswith("reference")}
+        if unknown:
+            raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
+        self.n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
+        # references depend on t only: tabulate them once for every tick
+        times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
+        columns = {c: [f(t) for t in times] for c, f in references.items()}
+        self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
+
+    def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
+        """Run control period k; return (measured channels, recorded commands) at its start."""
+        t = k * CONTROL_PERIOD
+        obs = self.rig.observe(self.references[k])
+        recorded = self.rig.actuate(self.controller(t, obs))
+        mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
+        mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
+        if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
+            _check_state(self.model, self.data, t + CONTROL_PERIOD)
+        return obs, recorded
+
+
+def simulate(scenario: dict, progress: Callable[[float], None] | None = None) -> SimResult:
+    """Run a checked scenario (scenario.load_scenario) and return its recording and drawings.
+
+    Raises ConfigError for an impossible configuration and SimulationError on divergence.
+    `progress(fraction)` is called about every simulated 0.1 s.
+    """
+    loop = ControlLoop(scenario)
+    rig, n_ticks = loop.rig, loop.n_ticks
+    rows = []
+    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * CONTROL_PERIOD))))
+    frames, frame_time = [], []
+    report_every = max(1, int(0.1 / CONTROL_PERIOD))
+    start = wallclock.perf_counter()
+    for k in range(n_ticks):
+        if k % frame_every == 0:
+            frames.append(rig.arm_points())
+            frame_time.append(k * CONTROL_PERIOD)
+        obs, recorded = loop.tick(k)
+        rows.append(obs | recorded)
+        if progress and k % report_every == 0:
+            progress(k / n_ticks)
+    wall = wallclock.perf_counter() - start
+    if progress:
+        progress(1.0)
+    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * CONTROL_PERIOD, wall)
+
+    channels = {}
+    for c in rig.channels:
+        values = np.array([row.get(c, np.nan) for row in rows], dtype=float)
+        if not np.isnan(values).all():
+            channels[c] = values
+    controller_meta = dict(scenario["controller"])
+    meta = {
+        "format": FORMAT,
+        "rig": scenario["rig"],
+        "experiment": scenario["experiment"],
+        "payload_kg": scenario["payload_kg"],
+        "controller": controller_meta,
+        "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
+        "locked_joints": scenario["locked_joints"],
+        "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
+        "seed": scenario["seed"],
+        "scenario": {k: v for k, v in scenario.items() if k != "name"},
+    }
+    time = np.arange(n_ticks) * CONTROL_PERIOD
+    return SimResult(Recording(time, channels, meta), np.array(frames), np.array(frame_time), wall)
+
+
+def energy(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """Kinetic + potential (gravity and joint springs) energy (J); needs mjENBL_ENERGY."""
+    mujoco.mj_energyPos(model, data)
+    mujoco.mj_energyVel(model, data)
+    return float(data.energy[0] + data.energy[1])
+
+

@@ -1,0 +1,51 @@
+"""Step-response and fit metrics, in the units of the signals given."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def step_metrics(t: np.ndarray, y: np.ndarray, t_step: float, initial: float, final: float,
+                 settle_band: float = 0.02) -> dict[str, float]:
+    """Rise time (10-90 %, s), settling time (into +-2 % of the step, s, from t_step),
+    overshoot (% of the step) and steady-state error (mean of the last 10 % of samples, in y's unit).
+
+    The step is `final - initial` (either sign). NaN where the response never reaches a level.
+    """
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    after = t >= t_step
+    tt, s = t[after], (y[after] - initial) / (final - initial)  # normalised: 0 -> 1
+
+    def first(level: float) -> float:
+        idx = np.flatnonzero(s >= level)
+        return float(tt[idx[0]]) if idx.size else np.nan
+
+    outside = np.flatnonzero(np.abs(s - 1.0) > settle_band)
+    if outside.size == 0:
+        settling = 0.0
+    elif outside[-1] + 1 < tt.size:
+        settling = float(tt[outside[-1] + 1] - t_step)
+    else:
+        settling = np.nan
+    tail = y[after][-max(1, tt.size // 10):]
+    return {
+        "rise_time_s": first(0.9) - first(0.1),
+        "settling_time_s": settling,
+        "overshoot_pct": float(max(0.0, s.max() - 1.0) * 100.0),
+        "steady_state_error": float(final - tail.mean()),
+    }
+
+
+def nrmse(measured: np.ndarray, simulated: np.ndarray) -> float:
+    """RMS(measured - simulated) / RMS(measured - mean(measured)), NaN samples ignored (recordings.md)."""
+    m, s = np.asarray(measured, float), np.asarray(simulated, float)
+    ok = np.isfinite(m) & np.isfinite(s)
+    m, s = m[ok], s[ok]
+    spread = np.sqrt(np.mean((m - m.mean()) ** 2))
+    return float(np.sqrt(np.mean((m - s) ** 2)) / spread) if spread > 0 else np.nan
+
+
+def correlation(measured: np.ndarray, simulated: np.ndarray) -> float:
+    """Pearson's correlation coefficient (laser_arm_paper eq. 26), NaN samples ignored."""
+    m, s = np.asarray(measured, float), np.asarray(simulated, float)
+    ok = np.isfinite(m) & np.isfinite(s)
+    return float(np.corrcoef(m[ok], s[ok])[0, 1])

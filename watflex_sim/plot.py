@@ -1,0 +1,48 @@
+"""PNG plots of recordings: one panel per kind of channel, measured and simulated on the same axes."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .recording import Recording  # noqa: E402
+from .rerun_log import channel_group  # noqa: E402
+
+
+def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = None, title: str = "") -> Path:
+    """Write a PNG of `rec` (solid) with `others` (label -> recording, dashed) overlaid.
+
+    One panel per group (angles, strains, commands, sensors) and unit; each panel's y label
+    carries the unit. Returns the path written.
+    """
+    units = rec.units()
+    groups: dict[tuple[str, str], list[str]] = {}
+    for name in rec.channels:
+        groups.setdefault((channel_group(name), units.get(name, "")), []).append(name)
+    fig, axes = plt.subplots(len(groups), 1, figsize=(10, 2.6 * len(groups)), sharex=True, squeeze=False)
+    for ax, ((group, unit), names) in zip(axes[:, 0], groups.items()):
+        for i, name in enumerate(names):
+            color = f"C{i % 10}"
+            y = rec.channels[name]
+            ok = np.isfinite(y)
+            style = "." if ok.mean() < 0.5 else "-"  # sparse channels (camera) as dots
+            ax.plot(rec.time[ok], y[ok], style, color=color, lw=1.2, ms=2, label=name)
+            for label, other in (others or {}).items():
+                if name in other.channels:
+                    yo = other.channels[name]
+                    ok = np.isfinite(yo)
+                    ax.plot(other.time[ok], yo[ok], "--", color=color, lw=1.0, alpha=0.8, label=f"{name} ({label})")
+        ax.set_ylabel(f"{group} [{unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best", ncol=2)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(title or f"{rec.rig}: {rec.meta.get('experiment', '')}")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,361 @@
+"""Recordings: samples in ``NAME.csv`` (or MATLAB ``NAME.mat``) plus a ``NAME.json`` sidecar.
+
+The contract is ``recordings.md`` section 1. Every bad input raises :class:`RecordingError`
+with a one-line message ``<file>: <cause>``; writing is atomic.
+"""
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import json
+import math
+import os
+import re
+import struct
+import uuid
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = "flexarm-recording/1"
+
+# rig -> {channel: SI unit}, the vocabulary table of recordings.md section 1.
+CHANNELS: dict[str, dict[str, str]] = {
+    "laser_arm": {"reference": "rad", "hub_angle": "rad", "tip_sensor": "V",
+                  "voltage_cmd": "V", "motor_current": "A"},
+    "watflex": {"shoulder_reference": "rad", "elbow_reference": "rad",
+                "shoulder_angle": "rad", "elbow_angle": "rad",
+                "shoulder_torque_cmd": "N m", "elbow_torque_cmd": "N m",
+                "strain_1A": "V", "strain_1B": "V", "strain_1C": "V",
+                "strain_2A": "V", "strain_2B": "V", "tip_x": "m", "tip_y": "m"},
+}
+
+# A CSV cell: a decimal number, or nan/inf (nan is read as a missing sample like an empty cell).
+_NUMBER = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.I)
+
+
+class RecordingError(ValueError):
+    """Bad recording or sidecar. ``str(err)`` is one line: ``<file>: <cause>``."""
+
+    def __init__(self, source, cause: str):
+        super().__init__(" ".join(f"{source}: {cause}".splitlines()))
+
+
+def _show(value, limit: int = 40) -> str:
+    """Short repr of an offending value for an error message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+@dataclass
+class Recording:
+    """One experiment: ``time`` in s (1-D, strictly increasing), ``channels`` mapping a
+    channel name to a 1-D float array in the unit of :data:`CHANNELS` (NaN = missing
+    sample), ``meta`` the sidecar dict."""
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray]
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def rig(self) -> str:
+        """``meta["rig"]``; raises RecordingError if absent or unknown."""
+        return _check_meta(self.meta, "recording", need_format=False)
+
+    def units(self) -> dict[str, str]:
+        """Channel name -> SI unit; raises RecordingError for an unknown rig or channel."""
+        _check_names(self.channels, self.rig, "recording")
+        return {name: CHANNELS[self.rig][name] for name in self.channels}
+
+
+def _check_meta(meta, source, need_format: bool) -> str:
+    """Check the sidecar's format tag and rig; return the rig."""
+    if not isinstance(meta, dict):
+        raise RecordingError(source, "sidecar is not a JSON object")
+    if "format" not in meta:
+        if need_format:
+            raise RecordingError(source, f"sidecar has no 'format' (expected {FORMAT!r})")
+    elif meta["format"] != FORMAT:
+        raise RecordingError(source, f"sidecar format {_show(meta['format'])} is not {FORMAT!r}")
+    if "rig" not in meta:
+        raise RecordingError(source, "sidecar has no 'rig'")
+    rig = meta["rig"]
+    if not isinstance(rig, str) or rig not in CHANNELS:
+        raise RecordingError(source, f"unknown rig {_show(rig)} (known: {', '.join(CHANNELS)})")
+    return rig
+
+
+def _check_names(names, rig: str, source) -> None:
+    """Raise naming the channels (and only those) that are not in the rig's vocabulary."""
+    unknown = [n for n in names if not isinstance(n, str) or n not in CHANNELS[rig]]
+    if unknown:
+        shown = ", ".join(_show(n) for n in unknown[:10])
+        more = f" (+{len(unknown) - 10} more)" if len(unknown) > 10 else ""
+        plural = "s" if len(unknown) > 1 else ""
+        raise RecordingError(source, f"unknown channel{plural} for rig {rig!r}: {shown}{more}")
+
+
+def _as_vector(value, what: str, source, squeeze: bool = False) -> np.ndarray:
+    """``value`` as a 1-D float64 array; ``squeeze`` accepts MATLAB row/column vectors."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise RecordingError(source, f"{what} is not real numeric data (dtype {arr.dtype})")
+    if squeeze and arr.ndim > 1 and arr.size == max(arr.shape):
+        arr = arr.reshape(-1)
+    if arr.ndim != 1:
+        raise RecordingError(source, f"{what} is not a vector (shape {arr.shape})")
+    return arr.astype(np.float64)
+
+
+def _check_samples(time, channels, source, where) -> None:
+    """Check time and channel arrays; ``where(i)`` names sample i ('line 5', 'sample 4')."""
+    n = len(time)
+    if n < 2:
+        raise RecordingError(source, f"fewer than 2 samples ({n})")
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        raise RecordingError(source, f"time is not finite at {where(bad[0])}")
+    back = np.flatnonzero(np.diff(time) <= 0)
+    if back.size:
+        i = back[0] + 1
+        raise RecordingError(source, f"time is not strictly increasing at {where(i)} "
+                                     f"({time[i]:.10g} s after {time[i - 1]:.10g} s)")
+    if not channels:
+        raise RecordingError(source, "no channels besides time")
+    for name, x in channels.items():
+        if len(x) != n:
+            raise RecordingError(source, f"channel {name!r} has {len(x)} samples, time has {n}")
+        inf = np.flatnonzero(np.isinf(x))
+        if inf.size:
+            raise RecordingError(source, f"channel {name!r} is infinite at {where(inf[0])}")
+        if np.isnan(x).all():
+            raise RecordingError(source, f"channel {name!r} has no samples (all empty/NaN)")
+
+
+def validate(rec: Recording, source: str = "recording") -> Recording:
+    """Check a recording against the contract; return it with float64 arrays.
+
+    Raises RecordingError (message starting with ``source``) for a bad format tag or rig,
+    unknown channels, non-vector or non-numeric arrays, fewer than 2 samples, non-finite
+    or non-increasing time, mismatched lengths, infinite or all-NaN channels, no channels.
+    """
+    rig = _check_meta(rec.meta, source, need_format=False)
+    if not isinstance(rec.channels, dict):
+        raise RecordingError(source, "channels is not a dict")
+    _check_names(rec.channels, rig, source)
+    time = _as_vector(rec.time, "time", source)
+    chans = {n: _as_vector(x, f"channel {n!r}", source) for n, x in rec.channels.items()}
+    _check_samples(time, chans, source, lambda i: f"sample {i}")
+    return Recording(time, chans, rec.meta)
+
+
+def _csv_text(rec: Recording) -> str:
+    """CSV text: header ``time,<channels>``, ``.10g`` numbers, NaN as an empty cell."""
+    cols = [rec.time.tolist()] + [x.tolist() for x in rec.channels.values()]
+    lines = [",".join(["time", *rec.channels])]
+    for row in zip(*cols):
+        lines.append(",".join("" if x != x else format(x, ".10g") for x in row))
+    return "\n".join(lines) + "\n"
+
+
+def write_recording(rec: Recording, directory, name: str) -> Path:
+    """Write ``directory/name.csv`` and ``name.json`` atomically; return the csv path.
+
+    Both files are written to temporary files in ``directory`` and then moved into place;
+    on error none of them is left behind. ``meta["format"]`` defaults to FORMAT. Raises
+    RecordingError for invalid data, a bad ``name`` or a meta that is not JSON-serialisable;
+    OSError for I/O failures.
+    """
+    directory = Path(directory)
+    seps = {"/", "\0", os.sep, os.altsep} - {None}
+    if not isinstance(name, str) or name in ("", ".", "..") or any(s in name for s in seps):
+        raise RecordingError(directory, f"bad recording name {_show(name)}")
+    csv_path, json_path = directory / f"{name}.csv", directory / f"{name}.json"
+    rec = validate(rec, str(csv_path))
+    meta = {"format": FORMAT, **rec.meta}
+    try:
+        sidecar = json.dumps(meta, indent=2, sort_keys=True) + "\n"
+    except (TypeError, ValueError) as err:
+        raise RecordingError(json_path, f"meta is not JSON-serialisable: {err}") from None
+    contents = [(csv_path, _csv_text(rec).encode()), (json_path, sidecar.encode())]
+    directory.mkdir(parents=True, exist_ok=True)
+    csv_existed = csv_path.exists()
+    temps, placed = [], []
+    try:
+        for target, data in contents:
+            tmp = directory / f".{name}.{uuid.uuid4().hex}{target.suffix}.tmp"
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            temps.append(tmp)
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+        for tmp, (target, _) in zip(temps, contents):
+            os.replace(tmp, target)
+            placed.append(target)
+    except BaseException:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+        if placed == [csv_path] and not csv_existed:  # no csv without its sidecar
+            csv_path.unlink(missing_ok=True)
+        raise
+    return csv_path
+
+
+def _read_bytes(path: Path, source, missing: str = "file not found") -> bytes:
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise RecordingError(source, missing) from None
+    except (OSError, ValueError) as err:  # ValueError: NUL in the path
+        raise RecordingError(source, f"cannot read {path.name}: "
+                                     f"{getattr(err, 'strerror', None) or err}") from None
+
+
+def _load_sidecar(path: Path) -> dict:
+    side = path.with_suffix(".json")
+    raw = _read_bytes(side, path, f"sidecar {side.name} not found")
+    try:
+        return json.loads(raw.decode("utf-8-sig"))
+    except UnicodeDecodeError as err:
+        raise RecordingError(side, f"sidecar is not UTF-8 text (byte {err.start})") from None
+    except (ValueError, RecursionError) as err:
+        raise RecordingError(side, f"sidecar is not valid JSON: {err}") from None
+
+
+def _read_csv(raw: bytes, rig: str, source):
+    """Parse the CSV; return (time, channels, where) with ``where(i)`` = 'line N'."""
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise RecordingError(source, f"not UTF-8 text (byte {err.start})") from None
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    header, rows, lines = None, [], []
+    try:
+        for row in reader:
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue  # blank line
+            if header is None:
+                header = [c.strip() for c in row]
+            else:
+                rows.append(row)
+                lines.append(reader.line_num)
+    except csv.Error as err:
+        raise RecordingError(source, f"malformed CSV at line {reader.line_num}: {err}") from None
+    if header is None:
+        raise RecordingError(source, "empty file (no header line)")
+    if "" in header:
+        raise RecordingError(source, f"empty column name in header (column {header.index('') + 1})")
+    if len(set(header)) < len(header):
+        dup = next(h for j, h in enumerate(header) if h in header[:j])
+        raise RecordingError(source, f"duplicate column {_show(dup)} in header")
+    if "time" not in header:
+        raise RecordingError(source, "no 'time' column in header")
+    _check_names([h for h in header if h != "time"], rig, source)
+    data = np.empty((len(rows), len(header)))
+    for k, row in enumerate(rows):
+        if len(row) != len(header):
+            raise RecordingError(source, f"line {lines[k]} has {len(row)} fields, "
+                                         f"header has {len(header)}")
+        cells = [c.strip() for c in row]
+        bad = [j for j, c in enumerate(cells) if c and not _NUMBER.fullmatch(c)]
+        if bad:
+            raise RecordingError(source, f"line {lines[k]}, column {header[bad[0]]!r}: "
+                                         f"{_show(row[bad[0]])} is not a number")
+        data[k] = [float(c) if c else np.nan for c in cells]
+    cols = {h: np.ascontiguousarray(data[:, j]) for j, h in enumerate(header)}
+    time = cols.pop("time")
+    return time, cols, lambda i: f"line {lines[i]}"
+
+
+# MAT v5 data types -> bytes per element, for real numeric data (miINT8 .. miUINT64).
+_MAT_NUMERIC = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
+
+
+def _mat_elements(buf: bytes, order: str, source) -> list[tuple[int, bytes]]:
+    """Split a MAT v5 byte stream into (type, payload) data elements."""
+    pos, out = 0, []
+    while pos < len(buf):
+        if len(buf) - pos < 8:
+            raise RecordingError(source, "truncated MATLAB file")
+        mdtype, nbytes = struct.unpack_from(order + "II", buf, pos)
+        if mdtype >> 16:  # small element: size and type share the first word
+            mdtype, nbytes = mdtype & 0xFFFF, mdtype >> 16
+            out.append((mdtype, buf[pos + 4: pos + 4 + min(nbytes, 4)]))
+            pos += 8
+            continue
+        if pos + 8 + nbytes > len(buf):
+            raise RecordingError(source, "truncated MATLAB file")
+        out.append((mdtype, buf[pos + 8: pos + 8 + nbytes]))
+        pos += 8 + (nbytes if mdtype == 15 else -(-nbytes // 8) * 8)
+    return out
+
+
+def _check_mat(raw: bytes, source) -> None:
+    """Accept only MAT v5/v7 files of plain real numeric arrays: scipy.io.loadmat can crash
+    the interpreter (segfault) on malformed ones, so their structure is checked first."""
+    order = {b"IM": "<", b"MI": ">"}.get(raw[126:128])
+    if len(raw) < 128 or not order or struct.unpack_from(order + "H", raw, 124)[0] != 0x0100:
+        raise RecordingError(source, "not a MATLAB v5/v7 file (v4 and v7.3 are not supported)")
+    for mdtype, payload in _mat_elements(raw[128:], order, source):
+        if mdtype == 15:  # miCOMPRESSED: one zlib-compressed element
+            try:
+                inner = _mat_elements(zlib.decompress(payload), order, source)
+            except zlib.error as err:
+                raise RecordingError(source, f"corrupt compressed MATLAB data: {err}") from None
+            mdtype, payload = inner[0] if len(inner) == 1 else (0, b"")
+        parts = _mat_elements(payload, order, source) if mdtype == 14 else []  # miMATRIX
+        if [kind for kind, _ in parts[:3]] != [6, 5, 1] or len(parts[0][1]) != 8 \
+                or len(parts[1][1]) < 8 or len(parts[1][1]) % 4:
+            raise RecordingError(source, "malformed MATLAB variable")
+        flags = struct.unpack_from(order + "I", parts[0][1])[0]
+        dims = struct.unpack(order + f"{len(parts[1][1]) // 4}i", parts[1][1])
+        name = parts[2][1].decode("latin-1")
+        kind, data = parts[3] if len(parts) == 4 else (0, b"")
+        if not 6 <= flags & 0xFF <= 15 or flags & 0x800 or kind not in _MAT_NUMERIC \
+                or min(dims) < 0 or len(data) != math.prod(dims) * _MAT_NUMERIC[kind]:
+            raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real "
+                                         "numeric array")
+
+
+def _read_mat(raw: bytes, rig: str, source):
+    """Load a MATLAB file; return (time, channels, where) with ``where(i)`` = 'sample i'."""
+    import scipy.io
+
+    _check_mat(raw, source)
+    try:
+        mat = scipy.io.loadmat(io.BytesIO(raw))
+    except Exception as err:  # scipy raises a zoo of types on corrupt files
+        cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
+    names = [k for k in mat if not k.startswith("__")]
+    if "time" not in names:
+        raise RecordingError(source, "no 'time' variable")
+    _check_names([n for n in names if n != "time"], rig, source)
+    time = _as_vector(mat["time"], "time", source, squeeze=True)
+    chans = {n: _as_vector(mat[n], f"variable {n!r}", source, squeeze=True)
+             for n in names if n != "time"}
+    return time, chans, lambda i: f"sample {i}"
+
+
+def read_recording(path, sidecar: dict | None = None) -> Recording:
+    """Read ``X.csv`` or ``X.mat`` with its sidecar ``X.json`` (or the given ``sidecar``).
+
+    Time in s, channels in the units of :data:`CHANNELS`, empty cells as NaN. Raises
+    RecordingError (one line, naming the file) for any unreadable or invalid input.
+    """
+    path = Path(path)
+    source = str(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".mat"):
+        raise RecordingError(source, "not a .csv or .mat recording")
+    raw = _read_bytes(path, source)
+    meta = _load_sidecar(path) if sidecar is None else copy.deepcopy(sidecar)
+    rig = _check_meta(meta, path.with_suffix(".json") if sidecar is None else source, True)
+    reader = _read_csv if suffix == ".csv" else _read_mat
+    time, chans, where = reader(raw, rig, source)
+    _check_samples(time, chans, source, where)
+    return Recording(time, chans, meta)

@@ -1,0 +1,220 @@
+"""The rigs' sensors and actuators as the real rigs have them (rigs.md §1-3).
+
+A `Rig` turns MuJoCo state into the measured channels of recordings.md (with quantisation
+and seeded noise) and a controller's commands into actuator inputs (with saturation and
+converters). Everything is looked up by name once, at construction; the per-tick methods
+work on Python floats (they run every 1 ms).
+"""
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from .params import CONTROL_PERIOD, LaserArm, Watflex
+
+
+def quantise(value: float, step: float) -> float:
+    """Round to the nearest multiple of `step` (an encoder count or a converter code)."""
+    return step * round(value / step)
+
+
+def clip(value: float, limit: float) -> float:
+    """`value` limited to [-limit, limit]."""
+    return -limit if value < -limit else limit if value > limit else value
+
+
+class NoiseStream:
+    """Seeded draws handed out one at a time from blocks (cheaper than one numpy call each)."""
+
+    BLOCK = 4096
+
+    def __init__(self, rng: np.random.Generator, draw: str = "standard_normal"):
+        self._draw = getattr(rng, draw)
+        self._block: list[float] = []
+
+    def __call__(self) -> float:
+        if not self._block:
+            self._block = self._draw(self.BLOCK).tolist()[::-1]
+        return self._block.pop()
+
+
+class Rig:
+    """Common part: model, data, seeded noise streams, the arm's drawing points."""
+
+    name: str
+    channels: tuple[str, ...]
+    command_channels: tuple[str, ...]
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, params, noise: bool, seed: int):
+        self.model, self.data, self.p = model, data, params
+        self.noise = 1.0 if noise else 0.0
+        normal_seed, uniform_seed = np.random.SeedSequence(seed).spawn(2)
+        self.gauss = NoiseStream(np.random.default_rng(normal_seed))
+        self.uniform = NoiseStream(np.random.default_rng(uniform_seed), "random")  # [0, 1)
+        # bodies in tree order: the rigid segments' origins, root to tip, then the tip site
+        self._draw_bodies = np.arange(1, model.nbody)
+        self._tip = model.site("tip").id
+        self._tip_xpos = data.site_xpos[self._tip]  # a view: current after each kinematics pass
+
+    def arm_points(self) -> np.ndarray:
+        """(n, 3) positions (m) of the chain of rigid bodies and the tip, root to tip, for drawing."""
+        return np.vstack([self.data.xpos[self._draw_bodies], self._tip_xpos])
+
+    def _qpos(self, joint: str) -> int | None:
+        jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+        return None if jid < 0 else int(self.model.jnt_qposadr[jid])
+
+    def _dof(self, joint: str) -> int | None:
+        jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+        return None if jid < 0 else int(self.model.jnt_dofadr[jid])
+
+
+class LaserArmRig(Rig):
+    """rigs.md §1: hub encoder, tip (laser spot) sensor, voltage drive with current monitor."""
+
+    name = "laser_arm"
+    channels = ("reference", "hub_angle", "tip_sensor", "voltage_cmd", "motor_current")
+    command_channels = ("voltage_cmd",)
+
+    def __init__(self, model, data, params: LaserArm, noise: bool, seed: int):
+        super().__init__(model, data, params, noise, seed)
+        self._hub_q, self._hub_v = self._qpos("hub"), self._dof("hub")
+        self._motor = model.actuator("motor").id if self._hub_q is not None else None
+        self._length = params.beam.length
+        self._tip_noise = self.noise * params.noise_tip_sensor
+        self._current_noise = self.noise * params.noise_current
+
+    def hub_velocity(self) -> float:
+        """Hub speed (rad/s); 0 when the hub is locked."""
+        return 0.0 if self._hub_v is None else self.data.qvel[self._hub_v].item()
+
+    def tip_arc(self) -> float:
+        """Tip position along the laser arc, L * atan2(y, x) (m): L theta + w(L) for small w."""
+        return self._length * math.atan2(self._tip_xpos[1].item(), self._tip_xpos[0].item())
+
+    def observe(self, reference: dict[str, float]) -> dict[str, float]:
+        """Measured channels at the current state (V, rad), before the command is computed."""
+        p = self.p
+        theta = 0.0 if self._hub_q is None else self.data.qpos[self._hub_q].item()
+        error = self._length * reference["reference"] - self.tip_arc()  # m
+        tip = p.sensor_gain * error + self._tip_noise * self.gauss()
+        return {
+            "reference": reference["reference"],
+            "hub_angle": quantise(theta, p.encoder_step),
+            "tip_sensor": clip(tip, p.sensor_limit),
+        }
+
+    def current(self, voltage: float) -> float:
+        """Armature current (A) = clip((u - K_E w) / R, +-i_max), rigs.md §1 'Drive'."""
+        p = self.p
+        return clip((voltage - p.back_emf * self.hub_velocity()) / p.resistance, p.current_limit)
+
+    def actuate(self, command: dict[str, float]) -> dict[str, float]:
+        """Saturate the voltage (V), apply it, and return the recorded command and current (A)."""
+        u = clip(float(command.get("voltage_cmd", 0.0)), self.p.voltage_limit)
+        if self._motor is not None:
+            self.data.ctrl[self._motor] = u
+        return {"voltage_cmd": u, "motor_current": self.current(u) + self._current_noise * self.gauss()}
+
+
+class WatflexRig(Rig):
+    """rigs.md §2-3: encoders, strain bridges, overhead camera, torque via 12-bit converter."""
+
+    name = "watflex"
+    channels = (
+        "shoulder_reference", "elbow_reference", "shoulder_angle", "elbow_angle",
+        "shoulder_torque_cmd", "elbow_torque_cmd",
+        "strain_1A", "strain_1B", "strain_1C", "strain_2A", "strain_2B", "tip_x", "tip_y",
+    )
+    command_channels = ("shoulder_torque_cmd", "elbow_torque_cmd")
+    joints = ("shoulder", "elbow")
+
+    def __init__(self, model, data, params: Watflex, noise: bool, seed: int, locked: dict[str, float] | None = None):
+        super().__init__(model, data, params, noise, seed)
+        locked = locked or {}
+        self._joint_q = {j: self._qpos(j) for j in self.joints}
+        self._locked = {j: float(locked.get(j, 0.0)) for j in self.joints}
+        self._motor = {j: model.actuator(f"{j}_motor").id for j in self.joints if self._joint_q[j] is not None}
+        # per joint: (command channel, volts per N m, converter step in V, lowest and highest code)
+        self._dac = {}
+        for j, act in (("shoulder", params.shoulder), ("elbow", params.elbow)):
+            half = 2 ** (act.dac_bits - 1)
+            self._dac[j] = (f"{j}_torque_cmd", 1.0 / (act.amplifier_gain * act.torque_constant),
+                            2 * act.dac_range / 2**act.dac_bits, -half, half - 1)
+        # per gauge: (channel, hinge qpos a, b, volts per hinge radian at a, b): V = -(t/2) w'' / K
+        self._gauges = []
+        for name, (link, x_gauge, k_bridge) in params.gauges.items():
+            qa, qb, wa, wb, thickness = self._gauge_weights(link, x_gauge)
+            volts = -0.5 * thickness / k_bridge
+            self._gauges.append((f"strain_{name}", qa, qb, volts * wa, volts * wb))
+        self._adc_step = 2 * params.strain_adc_range / 4096
+        self._strain_noise = self.noise * params.noise_strain
+        self._camera_noise = self.noise * params.camera_error
+        self._camera_every = int(round(1.0 / (params.camera_rate * CONTROL_PERIOD)))
+        self._tick = 0
+        self._draw_bodies = np.array(
+            [b for b in range(1, model.nbody) if not model.body(b).name.startswith("link2_root")]
+        )
+
+    def _gauge_weights(self, link: int, x_gauge: float):
+        """Curvature at x_gauge (1/m) = wa q_a + wb q_b over the two nearest hinges (linear inter/extrapolation).
+
+        Hinge i of an N-segment chain sits at (i - 1/2) dx and carries M = k q = EI q / dx,
+        so the curvature there is q / dx.
+        """
+        beam = self.p.link1 if link == 1 else self.p.link2
+        n, dx = self.p.n_segments, beam.length / self.p.n_segments
+        i = min(max(int(math.floor(x_gauge / dx + 0.5)), 1), n - 1)  # hinges i and i+1 bracket x
+        wb = (x_gauge - (i - 0.5) * dx) / dx
+        qa, qb = self._qpos(f"link{link}_j{i:02d}"), self._qpos(f"link{link}_j{i + 1:02d}")
+        return qa, qb, (1 - wb) / dx, wb / dx, beam.thickness
+
+    def strain(self, gauge: str) -> float:
+        """Surface strain eps = -(t/2) w'' at a gauge (thesis eq. 5.4), w'' from the hinge angles."""
+        link, x_gauge, _k = self.p.gauges[gauge]
+        qa, qb, wa, wb, thickness = self._gauge_weights(link, x_gauge)
+        return -0.5 * thickness * (wa * self.data.qpos[qa].item() + wb * self.data.qpos[qb].item())
+
+    def joint_angle(self, joint: str) -> float:
+        """Joint angle (rad); the lock angle for a locked joint."""
+        q = self._joint_q[joint]
+        return self._locked[joint] if q is None else self.data.qpos[q].item()
+
+    def observe(self, reference: dict[str, float]) -> dict[str, float]:
+        """Encoders (rad), bridge voltages (V), camera (m, 25 Hz, NaN between frames)."""
+        p = self.p
+        qpos = self.data.qpos.tolist()  # one conversion, then plain float indexing
+        angle = {j: self._locked[j] if q is None else qpos[q] for j, q in self._joint_q.items()}
+        obs = {
+            "shoulder_reference": reference.get("shoulder_reference", self._locked["shoulder"]),
+            "elbow_reference": reference.get("elbow_reference", self._locked["elbow"]),
+            "shoulder_angle": quantise(angle["shoulder"], p.encoder_step),
+            "elbow_angle": quantise(angle["elbow"], p.encoder_step),
+        }
+        limit, step = p.strain_adc_range, self._adc_step
+        for channel, qa, qb, va, vb in self._gauges:
+            volts = va * qpos[qa] + vb * qpos[qb] + self._strain_noise * self.gauss()
+            obs[channel] = quantise(clip(volts, limit), step)
+        if self._tick % self._camera_every == 0:
+            e = self._camera_noise
+            obs["tip_x"] = self._tip_xpos[0].item() + e * (2 * self.uniform() - 1)
+            obs["tip_y"] = self._tip_xpos[1].item() + e * (2 * self.uniform() - 1)
+        else:
+            obs["tip_x"] = obs["tip_y"] = math.nan
+        self._tick += 1
+        return obs
+
+    def actuate(self, command: dict[str, float]) -> dict[str, float]:
+        """Torque (N m) -> amplifier volts, clipped to +-10 V and quantised to 12 bits -> torque applied."""
+        out = {}
+        for j, (channel, volts_per_nm, step, lowest, highest) in self._dac.items():
+            code = round(float(command.get(channel, 0.0)) * volts_per_nm / step)
+            torque = min(max(code, lowest), highest) * step / volts_per_nm
+            if j in self._motor:
+                self.data.ctrl[self._motor[j]] = torque
+            else:
+                torque = 0.0
+            out[channel] = torque
+        return out
