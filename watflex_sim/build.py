@@ -127,6 +127,17 @@ def _bearing(body, name: str, mass: float, p: Watflex):
     m.group = 3
 
 
+def _sticking_friction(joint, friction, p: Watflex) -> None:
+    """Native dry friction that holds the joint exactly: level = break-away (N m), made nearly hard.
+
+    The friction callback (joint_friction.py) resets the level every physics step from the
+    friction law; the value here is the positive-direction break-away.
+    """
+    joint.frictionloss = friction.alpha0 + friction.alpha1
+    joint.solref_friction = list(p.stick_solref)
+    joint.solimp_friction = list(p.stick_solimp) + [0.5, 2.0]
+
+
 def build_watflex(p: Watflex) -> mujoco.MjSpec:
     """Watflex: shoulder fixed to the table, two flexible links, elbow and end effector on air bearings."""
     spec = _spec("watflex", p.timestep)
@@ -143,6 +154,7 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     shoulder = spec.worldbody.add_body(name="shoulder_body", pos=[0, 0, z])
     j = shoulder.add_joint(name="shoulder", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     j.armature = p.shoulder.inertia  # kg m^2 at the output, thesis 4.5.6
+    _sticking_friction(j, p.shoulder_friction[0], p)
     _rigid_bar(shoulder, "link1_root_clamp", 0.0, p.l1a)
     tip1 = add_flexible_chain(shoulder, "link1", p.link1, p.n_segments, p.l1a)
     x1 = chain_tip_x(p.link1, p.n_segments)
@@ -153,6 +165,7 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     link2 = elbow_housing.add_body(name="link2_root")
     j = link2.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     j.armature = p.elbow.inertia  # kg m^2 at the output, thesis 4.5.6
+    _sticking_friction(j, p.elbow_friction[0], p)
     _rigid_bar(link2, "link2_root_clamp", 0.0, p.l2a)
     tip2 = add_flexible_chain(link2, "link2", p.link2, p.n_segments, p.l2a)
     x2 = chain_tip_x(p.link2, p.n_segments)

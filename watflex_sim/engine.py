@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 
 from . import __version__
+from .joint_friction import FrictionCallback, configure, nominal_frictions
 from .model import ConfigError, load_model, rig_params
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
@@ -125,11 +126,13 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
 
 
 class ControlLoop:
-    """A scenario set up to run: model, data, rig, controller and references.
+    """A scenario set up to run: model, data, rig, joint friction, controller and references.
 
-    `tick(k)` does one 1 ms period at t = k ms: references -> sensors -> controller ->
-    saturation/converters -> `n_sub` physics steps with the command held (zero-order hold),
-    then the divergence check. Raises ConfigError for an impossible configuration.
+    Use it as `with ControlLoop(scenario) as loop:` (the friction callback is process-global
+    and installed only inside the block). `tick(k)` does one 1 ms period at t = k ms:
+    references -> sensors -> controller -> saturation/converters -> `n_sub` physics steps with
+    the command held (zero-order hold), then the divergence check every CHECK_EVERY periods.
+    Raises ConfigError for an impossible configuration.
     """
 
     def __init__(self, scenario: dict):
@@ -152,6 +155,10 @@ class ControlLoop:
         self.rig = RIG_CLASSES[rig_name](
             self.model, self.data, rig_params(rig_name), scenario["noise"], scenario["seed"], **kwargs
         )
+        frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
+        if scenario["friction"] == "none":
+            self.model.dof_frictionloss[:] = 0.0
+        self.friction = FrictionCallback(self.model, self.data, configure(frictions, scenario["joint_friction"]))
         self.controller = make_controller(scenario, rig_name)
         self.controller.reset()
         references = _references(scenario, rig_name)
@@ -163,6 +170,13 @@ class ControlLoop:
         times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
         columns = {c: [f(t) for t in times] for c, f in references.items()}
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
+
+    def __enter__(self) -> "ControlLoop":
+        self.friction.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.friction.__exit__(*exc)
 
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
@@ -189,14 +203,15 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None) ->
     frames, frame_time = [], []
     report_every = max(1, int(0.1 / CONTROL_PERIOD))
     start = wallclock.perf_counter()
-    for k in range(n_ticks):
-        if k % frame_every == 0:
-            frames.append(rig.arm_points())
-            frame_time.append(k * CONTROL_PERIOD)
-        obs, recorded = loop.tick(k)
-        rows.append(obs | recorded)
-        if progress and k % report_every == 0:
-            progress(k / n_ticks)
+    with loop:
+        for k in range(n_ticks):
+            if k % frame_every == 0:
+                frames.append(rig.arm_points())
+                frame_time.append(k * CONTROL_PERIOD)
+            obs, recorded = loop.tick(k)
+            rows.append(obs | recorded)
+            if progress and k % report_every == 0:
+                progress(k / n_ticks)
     wall = wallclock.perf_counter() - start
     if progress:
         progress(1.0)

@@ -23,6 +23,8 @@ DEFAULTS = {
     "tilt_rad": 0.0,  # rad, table tilt (watflex)
     "tilt_azimuth_rad": 0.0,  # rad, downhill direction from +x
     "timestep": 0.0,  # s physics step; 0 = the model's own
+    "friction": "nominal",  # nominal (rigs.md joint friction) | none
+    "joint_friction": {},  # joint -> JointFriction fields overriding/adding (joint_friction.py)
     "noise": True,  # measurement noise of rigs.md §3
     "seed": 0,  # seed of every random draw
     "frame_rate_hz": 50.0,  # Hz, arm drawings sent to rerun
@@ -110,6 +112,10 @@ def check(scenario: dict) -> dict:
         raise ConfigError(f"noise must be true or false, got {scenario['noise']!r}")
     if not isinstance(scenario["controller"], dict) or "type" not in scenario["controller"]:
         raise ConfigError("scenario needs a [controller] table with a 'type'")
+    if scenario["friction"] not in ("nominal", "none"):
+        raise ConfigError(f"friction must be 'nominal' or 'none', got {scenario['friction']!r}")
+    if not isinstance(scenario["joint_friction"], dict):
+        raise ConfigError("joint_friction must be a table joint = {field = value}")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):

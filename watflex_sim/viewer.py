@@ -14,7 +14,7 @@ FRAME_EVERY = 16  # control periods between redraws (~60 frames per second)
 def view(scenario: dict) -> None:
     """Run `scenario` at real time in the passive viewer until its duration or the window closes."""
     loop = ControlLoop(scenario)
-    with mujoco.viewer.launch_passive(loop.model, loop.data) as handle:
+    with loop, mujoco.viewer.launch_passive(loop.model, loop.data) as handle:
         start = time.perf_counter()
         for k in range(loop.n_ticks):
             if not handle.is_running():

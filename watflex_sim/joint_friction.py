@@ -1,0 +1,143 @@
+"""Joint friction of the plant, installed as a MuJoCo passive-force callback.
+
+Sticking is MuJoCo's own: each hinge with friction has a `frictionloss` constraint (made
+nearly hard in the model: solref 1 ms, solimp 0.9999), which holds the joint exactly under
+any coupled load up to its level and slides at that level beyond it. The callback sets that
+level every physics step from the friction law (break-away at rest, the Stribeck level
+of the direction of motion when sliding, raised by dwell time) and adds what is not a
+level (viscous, position-dependent torque) as a passive torque. The LuGre option replaces
+both by the LuGre torque. The level set in one step acts from the next (MuJoCo builds its
+constraints before the passive forces), a lag of one physics step (0.1-0.5 ms).
+
+MuJoCo's callbacks are global to the process: use one simulation per process at a time and
+always leave the `with` block (the callback is removed in `__exit__`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import mujoco
+
+from .friction import lugre_step, stribeck_level
+from .model import ConfigError
+from .params import Friction
+
+V_REST = 1e-4  # rad/s: below this a joint is taken to be at rest (dwell timer, push direction)
+LAWS = ("exponential", "lugre")
+
+
+@dataclass(frozen=True)
+class JointFriction:
+    """Plant friction of one hinge (rigs.md §2; thesis eq. 4.5-4.6, 4.20, 4.1.6)."""
+
+    positive: Friction  # parameters for v > 0
+    negative: Friction  # parameters for v < 0
+    law: str = "exponential"  # exponential (stick + Stribeck, nominal) | lugre
+    sigma0: float = 259.0  # N m/rad, LuGre bristle stiffness; rigs.md §2 (thesis 4.5.4)
+    sigma1: float = 10.0  # N m s/rad, LuGre bristle damping; rigs.md §2
+    dwell_gain: float = 0.0  # break-away x (1 + gain (1 - exp(-t_rest / dwell_time))); thesis 4.1.6
+    dwell_time: float = 1.0  # s
+    ripple_amplitude: float = 0.0  # N m, torque a sin(2 pi q / ripple_period + ripple_phase)
+    ripple_period: float = 2 * math.pi  # rad
+    ripple_phase: float = 0.0  # rad
+    spring: float = 0.0  # N m/rad, cable drag as a spring about q = 0
+
+    def breakaway(self, direction: int, rest_time: float = 0.0) -> float:
+        """Break-away torque (N m) in a direction (+1/-1) after `rest_time` (s) at rest."""
+        p = self.positive if direction > 0 else self.negative
+        return (p.alpha0 + p.alpha1) * (1.0 + self.dwell_gain * (1.0 - math.exp(-rest_time / self.dwell_time)))
+
+
+def nominal_frictions(rig: str) -> dict[str, JointFriction]:
+    """The nominal model's joint friction (rigs.md): Watflex shoulder and elbow; none on the laser arm."""
+    from .params import WATFLEX
+
+    if rig != "watflex":
+        return {}
+    return {"shoulder": JointFriction(*WATFLEX.shoulder_friction), "elbow": JointFriction(*WATFLEX.elbow_friction)}
+
+
+def configure(base: dict[str, JointFriction], overrides: dict) -> dict[str, JointFriction]:
+    """Apply a scenario's `joint_friction` table ({joint: {field: value, positive: {alpha0: ..}}}).
+
+    A joint not in `base` needs `positive` and `negative` given in full. ConfigError on an
+    unknown field or law.
+    """
+    out = dict(base)
+    for joint, fields in overrides.items():
+        if not isinstance(fields, dict):
+            raise ConfigError(f"joint_friction.{joint} must be a table")
+        fields = dict(fields)
+        try:
+            for side in ("positive", "negative"):
+                if side in fields:
+                    given = fields.pop(side)
+                    fields[side] = dataclasses.replace(getattr(out[joint], side), **given) if joint in out else Friction(**given)
+            out[joint] = dataclasses.replace(out[joint], **fields) if joint in out else JointFriction(**fields)
+        except TypeError as exc:
+            raise ConfigError(f"joint_friction.{joint}: {exc}") from None
+        if out[joint].law not in LAWS:
+            raise ConfigError(f"joint_friction.{joint}.law must be one of {', '.join(LAWS)}, got {out[joint].law!r}")
+    return out
+
+
+class FrictionCallback:
+    """Installs the friction of `frictions` (joint name -> JointFriction) on (model, data).
+
+    Use as `with FrictionCallback(model, data, frictions): mj_step(...)`. Joints missing from
+    the model (locked ones) are skipped. State per joint: time at rest (s), LuGre z (rad).
+    """
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, frictions: dict[str, JointFriction]):
+        self.model, self.data = model, data
+        self.dt = model.opt.timestep
+        self.joints = []  # [dof, qpos address, JointFriction, state]
+        for name, law in frictions.items():
+            jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            if jid < 0:
+                continue
+            dof = int(model.jnt_dofadr[jid])
+            self.joints.append([dof, int(model.jnt_qposadr[jid]), law, {"rest": 0.0, "z": 0.0}])
+            model.dof_frictionloss[dof] = law.breakaway(+1) if law.law == "exponential" else 0.0
+        self._previous = None
+
+    def __enter__(self) -> "FrictionCallback":
+        self._previous = mujoco.get_mjcb_passive()
+        mujoco.set_mjcb_passive(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        mujoco.set_mjcb_passive(self._previous)
+
+    def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        if d is not self.data:
+            return
+        dt = self.dt
+        for joint in self.joints:
+            dof, qadr, law, state = joint
+            v = d.qvel[dof].item()
+            torque = 0.0  # N m, added to the joint (the friction felt, i.e. -F)
+            if law.law == "lugre":
+                friction, state["z"] = lugre_step(v, state["z"], dt, law.sigma0, law.sigma1, law.positive, law.negative)
+                torque -= friction
+            else:
+                if v > V_REST:
+                    direction = 1
+                elif v < -V_REST:
+                    direction = -1
+                else:  # at rest: the direction the joint is pushed, against the holding force
+                    direction = 1 if d.qfrc_constraint[dof] <= 0 else -1
+                p = law.positive if direction > 0 else law.negative
+                state["rest"] = state["rest"] + dt if abs(v) < V_REST else 0.0
+                level = stribeck_level(abs(v), p)
+                if law.dwell_gain:
+                    level *= 1.0 + law.dwell_gain * (1.0 - math.exp(-state["rest"] / law.dwell_time))
+                m.dof_frictionloss[dof] = level
+                torque -= p.alpha2 * v
+            if law.ripple_amplitude or law.spring:
+                q = d.qpos[qadr].item()
+                torque -= law.ripple_amplitude * math.sin(2 * math.pi * q / law.ripple_period + law.ripple_phase)
+                torque -= law.spring * q
+            d.qfrc_passive[dof] += torque
