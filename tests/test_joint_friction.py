@@ -126,3 +126,14 @@ def test_callback_is_removed_after_the_block():
     with FrictionCallback(model, mujoco.MjData(model), nominal_frictions("watflex")):
         assert mujoco.get_mjcb_passive() is not None
     assert mujoco.get_mjcb_passive() is None
+
+
+def test_actuator_bench_keeps_only_the_identified_inertia():
+    """thesis 4.5.6: J_S = 3.41 kg m^2 identified with clamps; the bench adds only the root stub of link 1."""
+    model = load_model("watflex", actuator_bench="shoulder")
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    assert model.nv == 1 and model.joint(0).name == "shoulder"
+    M = np.zeros((1, 1))
+    mujoco.mj_fullM(model, data, M)
+    assert M[0, 0] == pytest.approx(WATFLEX.shoulder.inertia, rel=2e-3)

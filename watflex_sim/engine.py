@@ -145,6 +145,7 @@ class ControlLoop:
             tilt_rad=scenario["tilt_rad"],
             tilt_azimuth_rad=scenario["tilt_azimuth_rad"],
             timestep=scenario["timestep"] or None,
+            actuator_bench=scenario["actuator_bench"],
         )
         self.n_sub = substeps(CONTROL_PERIOD, self.model.opt.timestep)
         self.data = mujoco.MjData(self.model)

@@ -38,14 +38,28 @@ def load_model(
     tilt_rad: float = 0.0,
     tilt_azimuth_rad: float = 0.0,
     timestep: float | None = None,
+    actuator_bench: str = "",
 ) -> mujoco.MjModel:
     """Compile `rig` with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
 
     A locked joint is removed and its body turned to the lock angle, so it is exactly rigid.
     Tilt turns gravity by `tilt_rad` towards the azimuth `tilt_azimuth_rad` (rad from +x).
+    `actuator_bench` names a joint to test alone, as thesis section 4.5 tests the actuators:
+    the flexible chain it drives (and all it carries) is removed, so the joint moves its own
+    identified inertia (armature) and clamps only; the other joints are locked at 0.
     Raises ConfigError for a negative payload, an unknown joint or a bad timestep.
     """
     spec = nominal_spec(rig)
+    if actuator_bench:
+        joint = spec.joint(actuator_bench)
+        if joint is None or joint.type != mujoco.mjtJoint.mjJNT_HINGE:
+            raise ConfigError(f"actuator_bench: no hinge joint {actuator_bench!r} in {rig}")
+        carried = [b for b in joint.parent.bodies]  # the flexible chain and everything on it
+        for body in carried:
+            spec.delete(body)
+        others = {j.name: 0.0 for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_HINGE
+                  and j.name != actuator_bench and "_j" not in j.name}
+        locked_joints = {**others, **(locked_joints or {})}
     if payload_kg < 0:
         raise ConfigError(f"payload_kg must be >= 0, got {payload_kg}")
     if payload_kg > 0:

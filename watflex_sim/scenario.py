@@ -20,6 +20,7 @@ DEFAULTS = {
     "direction": "positive",  # positive | negative: sign of references and open-loop commands
     "payload_kg": 0.0,  # kg extra tip mass
     "locked_joints": {},  # joint -> angle (rad)
+    "actuator_bench": "",  # a joint tested alone, its flexible chain removed (thesis 4.5)
     "tilt_rad": 0.0,  # rad, table tilt (watflex)
     "tilt_azimuth_rad": 0.0,  # rad, downhill direction from +x
     "timestep": 0.0,  # s physics step; 0 = the model's own
