@@ -119,24 +119,8 @@ def initial_state(scenario: dict) -> tuple[mujoco.MjModel, mujoco.MjData, int]:
     loop's; otherwise repeats it: load_model with the scenario's options, keyframe 0,
     mj_forward, settled air bearings.
     """
-    if hasattr(engine, "ControlLoop"):
-        loop = engine.ControlLoop(scenario)
-        return loop.model, loop.data, loop.n_sub
-    model = load_model(
-        scenario["rig"],
-        payload_kg=scenario["payload_kg"],
-        locked_joints=scenario["locked_joints"],
-        tilt_rad=scenario["tilt_rad"],
-        tilt_azimuth_rad=scenario["tilt_azimuth_rad"],
-        timestep=scenario["timestep"] or None,
-    )
-    data = mujoco.MjData(model)
-    mujoco.mj_resetDataKeyframe(model, data, 0)
-    mujoco.mj_forward(model, data)
-    settle = getattr(engine, "_settle_bearings", None)
-    if settle is not None:
-        settle(model, data)
-    return model, data, engine.substeps(CONTROL_PERIOD, model.opt.timestep)
+    loop = engine.ControlLoop(scenario)
+    return loop.model, loop.data, loop.n_sub
 
 
 def time_bare(model: mujoco.MjModel, start: mujoco.MjData, n_steps: int, chunk: int) -> tuple[float, float, bool]:
@@ -426,6 +410,45 @@ def profile(name: str, args) -> str:
     return "\n".join(out)
 
 
+def bench_friction(args) -> str:
+    """Section 3: cost of the joint-friction callback per physics step vs the same model without friction."""
+    from watflex_sim.joint_friction import FrictionCallback, nominal_frictions
+
+    n_steps = 2000 if args.quick else 20000
+    rows = []
+    for label, overrides in (("elbow on the arm (watflex_elbow_step)", []),
+                             ("shoulder actuator bench", ['actuator_bench="shoulder"', "locked_joints={}",
+                                                          'reference.channel="shoulder_reference"',
+                                                          'controller.joints=["shoulder"]'])):
+        scenario = load_scenario("watflex_elbow_step", overrides)
+        model, start, _ = initial_state(scenario)
+        joint = "shoulder" if overrides else "elbow"
+        law = nominal_frictions("watflex")[joint]
+        act = model.actuator(f"{joint}_motor").id
+        for regime, torque in (("sticking", 0.5 * law.breakaway(+1)), ("sliding", 1.5 * law.breakaway(+1))):
+            start.ctrl[:] = 0.0
+            start.ctrl[act] = torque
+            frictionloss = model.dof_frictionloss.copy()
+            model.dof_frictionloss[:] = 0.0
+            bare = min(time_bare(model, start, n_steps, args.chunk)[0] for _ in range(args.repeats))
+            model.dof_frictionloss[:] = frictionloss
+            walls = []
+            for _ in range(args.repeats):
+                data = mujoco.MjData(model)
+                mujoco.mj_copyData(data, model, start)
+                with FrictionCallback(model, data, {joint: law}):
+                    t0 = time.perf_counter()
+                    mujoco.mj_step(model, data, nstep=n_steps)
+                    walls.append(time.perf_counter() - t0)
+            model.dof_frictionloss[:] = frictionloss
+            ours = min(walls)
+            rows.append([label, regime, f"{torque:.2f}", f"{1e6 * bare / n_steps:.2f}", f"{1e6 * ours / n_steps:.2f}",
+                         f"{ours / bare:.2f}", "yes" if ours / bare <= TARGET_RATIO else "NO"])
+    return "## 3. Joint friction: callback + frictionloss constraint vs the same model without friction\n\n" + table(
+        ["model", "regime", "torque (N m)", "no friction (us/step)", "with friction (us/step)", "ratio", f"<= {TARGET_RATIO}"],
+        rows) + f"\n\n{n_steps} physics steps at a constant torque, best of {args.repeats}."
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -445,6 +468,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="physics steps per sweep timing (default 5000; 500 with --quick)")
     parser.add_argument("--no-scenarios", action="store_true", help="skip section 1")
     parser.add_argument("--no-sweep", action="store_true", help="skip section 2")
+    parser.add_argument("--no-friction", action="store_true", help="skip section 3")
     parser.add_argument("--profile", nargs="*", metavar="SCENARIO",
                         help="add a cProfile breakdown (us per control tick) of these scenarios "
                              "(no name: laser_arm_step)")
@@ -465,6 +489,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\n" + bench_scenarios(args), flush=True)
     if not args.no_sweep:
         print("\n" + bench_segments(args), flush=True)
+    if not args.no_friction:
+        print("\n" + bench_friction(args), flush=True)
     for name in args.profile or ():
         print("\n" + profile(name, args), flush=True)
     print(f"\nbenchmark took {time.perf_counter() - t0:.1f} s")

@@ -55,8 +55,14 @@ def make_controller(scenario: dict, rig_name: str):
         return OpenLoop({c["channel"]: make_signal(c, sign) for c in scenario["command"]})
     if kind not in CONTROLLERS:
         raise ConfigError(f"unknown controller type {kind!r} (known: none, {', '.join(CONTROLLERS)})")
+    compensation = spec.pop("compensation", None)
     try:
-        return CONTROLLERS[kind](**spec)
+        controller = CONTROLLERS[kind](**spec)
+        if compensation is not None:  # [controller.compensation]: friction compensation around it
+            from controllers.friction_compensation import wrap_compensation
+
+            controller = wrap_compensation(controller, compensation, rig_params(rig_name))
+        return controller
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"controller {kind!r}: {exc}") from None
 

@@ -54,6 +54,8 @@ def load_model(
         joint = spec.joint(actuator_bench)
         if joint is None or joint.type != mujoco.mjtJoint.mjJNT_HINGE:
             raise ConfigError(f"actuator_bench: no hinge joint {actuator_bench!r} in {rig}")
+        if actuator_bench in (locked_joints or {}):
+            raise ConfigError(f"actuator_bench {actuator_bench!r} is also in locked_joints: the bench joint must be free")
         carried = [b for b in joint.parent.bodies]  # the flexible chain and everything on it
         for body in carried:
             spec.delete(body)

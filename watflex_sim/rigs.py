@@ -55,12 +55,13 @@ class Rig:
         self.uniform = NoiseStream(np.random.default_rng(uniform_seed), "random")  # [0, 1)
         # bodies in tree order: the rigid segments' origins, root to tip, then the tip site
         self._draw_bodies = np.arange(1, model.nbody)
-        self._tip = model.site("tip").id
-        self._tip_xpos = data.site_xpos[self._tip]  # a view: current after each kinematics pass
+        tip = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tip")  # none on an actuator bench
+        self._tip_xpos = data.site_xpos[tip] if tip >= 0 else None  # a view: current after each kinematics pass
 
     def arm_points(self) -> np.ndarray:
         """(n, 3) positions (m) of the chain of rigid bodies and the tip, root to tip, for drawing."""
-        return np.vstack([self.data.xpos[self._draw_bodies], self._tip_xpos])
+        points = self.data.xpos[self._draw_bodies]
+        return points.copy() if self._tip_xpos is None else np.vstack([points, self._tip_xpos])
 
     def _qpos(self, joint: str) -> int | None:
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
@@ -147,6 +148,8 @@ class WatflexRig(Rig):
         self._gauges = []
         for name, (link, x_gauge, k_bridge) in params.gauges.items():
             qa, qb, wa, wb, thickness = self._gauge_weights(link, x_gauge)
+            if qa is None or qb is None:  # the link is not in the model (actuator bench)
+                continue
             volts = -0.5 * thickness / k_bridge
             self._gauges.append((f"strain_{name}", qa, qb, volts * wa, volts * wb))
         self._adc_step = 2 * params.strain_adc_range / 4096
@@ -197,7 +200,7 @@ class WatflexRig(Rig):
         for channel, qa, qb, va, vb in self._gauges:
             volts = va * qpos[qa] + vb * qpos[qb] + self._strain_noise * self.gauss()
             obs[channel] = quantise(clip(volts, limit), step)
-        if self._tick % self._camera_every == 0:
+        if self._tick % self._camera_every == 0 and self._tip_xpos is not None:
             e = self._camera_noise
             obs["tip_x"] = self._tip_xpos[0].item() + e * (2 * self.uniform() - 1)
             obs["tip_y"] = self._tip_xpos[1].item() + e * (2 * self.uniform() - 1)
