@@ -13,7 +13,7 @@ import pytest
 
 from watflex_sim.joint_friction import FrictionCallback, JointFriction, nominal_frictions
 from watflex_sim.model import load_model
-from watflex_sim.params import WATFLEX
+from watflex_sim.params import STICK_SOLIMP, STICK_SOLREF, WATFLEX
 
 ELBOW = JointFriction(*WATFLEX.elbow_friction)
 COUNT = WATFLEX.encoder_step  # rad, one encoder count
@@ -28,8 +28,8 @@ def lone_joint(inertia: float = 1.25) -> mujoco.MjModel:
     j = body.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     j.armature = inertia
     j.frictionloss = 1.0
-    j.solref_friction = list(WATFLEX.stick_solref)
-    j.solimp_friction = list(WATFLEX.stick_solimp) + [0.5, 2.0]
+    j.solref_friction = list(STICK_SOLREF)
+    j.solimp_friction = list(STICK_SOLIMP)
     g = body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.01, 0, 0])
     g.mass = 1e-3
     spec.add_actuator(name="elbow_motor", target="elbow", trntype=mujoco.mjtTrn.mjTRN_JOINT)

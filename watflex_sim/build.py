@@ -12,7 +12,7 @@ import math
 
 import mujoco
 
-from .params import GRAVITY, LaserArm, Watflex
+from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, LaserArm, Watflex
 
 BEAM_RGBA = [0.75, 0.78, 0.82, 1]
 RIGID_RGBA = [0.3, 0.3, 0.35, 1]
@@ -85,6 +85,9 @@ def build_laser_arm(p: LaserArm) -> mujoco.MjSpec:
     joint = hub.add_joint(name="hub", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     joint.armature = p.reflected_motor_inertia  # N^2 J_e, kg m^2
     joint.damping = [p.hub_viscous, 0, 0]  # N m s/rad (linear term only)
+    # No dry friction in the nominal model (rigs.md §1); if an effect adds some, it sticks hard.
+    joint.solref_friction = list(STICK_SOLREF)
+    joint.solimp_friction = list(STICK_SOLIMP)
     # Hub: a cylinder about z whose inertia m r^2 / 2 is the derived J_hub.
     radius = 0.05
     g = hub.add_geom(name="hub", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius, 0.03, 0])
@@ -127,15 +130,15 @@ def _bearing(body, name: str, mass: float, p: Watflex):
     m.group = 3
 
 
-def _sticking_friction(joint, friction, p: Watflex) -> None:
+def _sticking_friction(joint, friction) -> None:
     """Native dry friction that holds the joint exactly: level = break-away (N m), made nearly hard.
 
     The friction callback (joint_friction.py) resets the level every physics step from the
     friction law; the value here is the positive-direction break-away.
     """
     joint.frictionloss = friction.alpha0 + friction.alpha1
-    joint.solref_friction = list(p.stick_solref)
-    joint.solimp_friction = list(p.stick_solimp) + [0.5, 2.0]
+    joint.solref_friction = list(STICK_SOLREF)
+    joint.solimp_friction = list(STICK_SOLIMP)
 
 
 def build_watflex(p: Watflex) -> mujoco.MjSpec:
@@ -154,7 +157,7 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     shoulder = spec.worldbody.add_body(name="shoulder_body", pos=[0, 0, z])
     j = shoulder.add_joint(name="shoulder", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     j.armature = p.shoulder.inertia  # kg m^2 at the output, thesis 4.5.6
-    _sticking_friction(j, p.shoulder_friction[0], p)
+    _sticking_friction(j, p.shoulder_friction[0])
     _rigid_bar(shoulder, "link1_root_clamp", 0.0, p.l1a)
     tip1 = add_flexible_chain(shoulder, "link1", p.link1, p.n_segments, p.l1a)
     x1 = chain_tip_x(p.link1, p.n_segments)
@@ -165,7 +168,7 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     link2 = elbow_housing.add_body(name="link2_root")
     j = link2.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
     j.armature = p.elbow.inertia  # kg m^2 at the output, thesis 4.5.6
-    _sticking_friction(j, p.elbow_friction[0], p)
+    _sticking_friction(j, p.elbow_friction[0])
     _rigid_bar(link2, "link2_root_clamp", 0.0, p.l2a)
     tip2 = add_flexible_chain(link2, "link2", p.link2, p.n_segments, p.l2a)
     x2 = chain_tip_x(p.link2, p.n_segments)

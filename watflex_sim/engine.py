@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import time as wallclock
 from dataclasses import dataclass
 from typing import Callable
@@ -10,7 +11,8 @@ import mujoco
 import numpy as np
 
 from . import __version__
-from .joint_friction import FrictionCallback, configure, nominal_frictions
+from .effects import Patch, apply_effects, apply_parameters
+from .joint_friction import FrictionCallback, configure, nominal_frictions, patched
 from .model import ConfigError, load_model, rig_params
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
@@ -141,18 +143,24 @@ class ControlLoop:
     Raises ConfigError for an impossible configuration.
     """
 
-    def __init__(self, scenario: dict):
+    def __init__(self, scenario: dict, parameter_names: dict[str, tuple[str, str]] | None = None):
         self.scenario = scenario
         rig_name = scenario["rig"]
+        self.patch = patch = Patch()
+        apply_parameters(patch, scenario["parameters"], parameter_names or {})
+        apply_effects(patch, scenario["effects"])
         self.model = load_model(
             rig_name,
-            payload_kg=scenario["payload_kg"],
+            payload_kg=scenario["payload_kg"] + patch.payload_kg,
             locked_joints=scenario["locked_joints"],
-            tilt_rad=scenario["tilt_rad"],
+            tilt_rad=scenario["tilt_rad"] + patch.tilt_rad,
             tilt_azimuth_rad=scenario["tilt_azimuth_rad"],
             timestep=scenario["timestep"] or None,
             actuator_bench=scenario["actuator_bench"],
+            edits=patch.spec_edits,
         )
+        for edit in patch.model_edits:
+            edit(self.model)
         self.n_sub = substeps(CONTROL_PERIOD, self.model.opt.timestep)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
@@ -165,7 +173,8 @@ class ControlLoop:
         frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
-        self.friction = FrictionCallback(self.model, self.data, configure(frictions, scenario["joint_friction"]))
+        frictions = patched(configure(frictions, scenario["joint_friction"]), patch.friction, patch.friction_add)
+        self.friction = FrictionCallback(self.model, self.data, frictions)
         self.controller = make_controller(scenario, rig_name)
         self.controller.reset()
         references = _references(scenario, rig_name)
@@ -177,6 +186,9 @@ class ControlLoop:
         times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
         columns = {c: [f(t) for t in times] for c, f in references.items()}
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
+        self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
+        self._sensor_fifo = {c: [math.nan] * n for c, n in patch.sensor_delay.items() if n > 0}
+        self._actuators = {c: a for c, a in self.rig.command_actuators.items() if c in patch.actuator}
 
     def __enter__(self) -> "ControlLoop":
         self.friction.__enter__()
@@ -189,12 +201,34 @@ class ControlLoop:
         """Run control period k; return (measured channels, recorded commands) at its start."""
         t = k * CONTROL_PERIOD
         obs = self.rig.observe(self.references[k])
-        recorded = self.rig.actuate(self.controller(t, obs))
+        if self.patch.sensor or self._sensor_fifo:
+            obs = self._sense(obs)
+        command = self.controller(t, obs)
+        recorded = self.rig.actuate(command)
+        if self._commands:  # delayed plant input; the recorded command is the one computed now
+            self._commands.append(command)
+            recorded = {**self.rig.actuate(self._commands.pop(0)), **{c: recorded[c] for c in self.rig.command_channels}}
+        for channel, actuator in self._actuators.items():
+            gain, offset, limit = self.patch.actuator[channel]
+            u = self.data.ctrl[actuator] * gain + offset
+            self.data.ctrl[actuator] = max(-limit, min(limit, u))
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
             _check_state(self.model, self.data, t + CONTROL_PERIOD)
         return obs, recorded
+
+    def _sense(self, obs: dict[str, float]) -> dict[str, float]:
+        """Sensor gain/offset and delay effects on the measured channels."""
+        obs = dict(obs)
+        for channel, (gain, offset) in self.patch.sensor.items():
+            if channel in obs:
+                obs[channel] = obs[channel] * gain + offset
+        for channel, fifo in self._sensor_fifo.items():
+            if channel in obs:
+                fifo.append(obs[channel])
+                obs[channel] = fifo.pop(0)
+        return obs
 
 
 def simulate(scenario: dict, progress: Callable[[float], None] | None = None) -> SimResult:

@@ -83,6 +83,32 @@ def configure(base: dict[str, JointFriction], overrides: dict) -> dict[str, Join
     return out
 
 
+def patched(frictions: dict[str, JointFriction], changes: dict[str, dict], additions: dict[str, dict]) -> dict[str, JointFriction]:
+    """Apply effects (effects.Patch.friction / friction_add) to joint frictions.
+
+    `changes`: joint -> JointFriction fields to set (and "scale": all levels times a ratio);
+    `additions`: joint -> {(side, field): delta} added to a direction's parameters. A joint
+    without friction starts from zero friction (v_s 0.03 rad/s).
+    """
+    out = dict(frictions)
+    zero = Friction(alpha0=0.0, alpha1=0.0, alpha2=0.0, v_s=0.03)
+    for joint in set(changes) | set(additions):
+        law = out.get(joint, JointFriction(zero, zero))
+        fields = dict(changes.get(joint, {}))
+        scale = fields.pop("scale", 1.0)
+        v_s = fields.pop("v_s", None)
+        sides = {}
+        for side in ("positive", "negative"):
+            p = getattr(law, side)
+            p = Friction(p.alpha0 * scale, p.alpha1 * scale, p.alpha2 * scale, v_s or p.v_s)
+            for (s, name), delta in additions.get(joint, {}).items():
+                if s == side:
+                    p = dataclasses.replace(p, **{name: getattr(p, name) + delta})
+            sides[side] = p
+        out[joint] = dataclasses.replace(law, **sides, **fields)
+    return out
+
+
 class FrictionCallback:
     """Installs the friction of `frictions` (joint name -> JointFriction) on (model, data).
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Callable, Sequence
 
 import mujoco
 
@@ -39,6 +40,7 @@ def load_model(
     tilt_azimuth_rad: float = 0.0,
     timestep: float | None = None,
     actuator_bench: str = "",
+    edits: Sequence[Callable[[mujoco.MjSpec], None]] = (),
 ) -> mujoco.MjModel:
     """Compile `rig` with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
 
@@ -47,9 +49,12 @@ def load_model(
     `actuator_bench` names a joint to test alone, as thesis section 4.5 tests the actuators:
     the flexible chain it drives (and all it carries) is removed, so the joint moves its own
     identified inertia (armature) and clamps only; the other joints are locked at 0.
+    `edits` change the spec first (effects and refit parameters, effects.Patch).
     Raises ConfigError for a negative payload, an unknown joint or a bad timestep.
     """
     spec = nominal_spec(rig)
+    for edit in edits:
+        edit(spec)
     if actuator_bench:
         joint = spec.joint(actuator_bench)
         if joint is None or joint.type != mujoco.mjtJoint.mjJNT_HINGE:

@@ -12,6 +12,10 @@ from dataclasses import dataclass, field
 
 GRAVITY = 9.81  # m/s^2 [ours: standard value, used for the air-bearing load]
 CONTROL_PERIOD = 1e-3  # s; rigs.md §1 "control period 1 ms", thesis 2.4 (1 ms sampling)
+# Joint dry friction as MuJoCo's frictionloss constraint, made nearly hard [ours]: creep
+# < 1e-6 rad in 10 s at 0.9 x break-away (tests/test_joint_friction.py).
+STICK_SOLREF = (0.001, 1.0)  # (time constant s, damping ratio): as hard as 0.5 ms steps allow
+STICK_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)  # (d0, dwidth, width m, midpoint, power)
 
 
 @dataclass(frozen=True)
@@ -175,8 +179,6 @@ class Watflex:
     # Joint friction, rigs.md §2 table (thesis table 4.3): (positive, negative) direction.
     shoulder_friction: tuple = (Friction(7.9707, 1.4476, 4.9349, 0.0363), Friction(7.7538, 0.8626, 4.3267, 0.0221))
     elbow_friction: tuple = (Friction(4.9589, 0.5232, 1.2563, 0.0402), Friction(5.4392, 0.5556, 0.8162, 0.0208))
-    stick_solref: tuple = (0.001, 1.0)  # (s, -) frictionloss constraint: as hard as 0.5 ms steps allow [ours]
-    stick_solimp: tuple = (0.9999, 0.9999, 0.001)  # creep < 1e-6 rad in 10 s at 0.9 break-away [ours]
     noise_strain: float = 0.002  # V rms; rigs.md §3 [choice]
     strain_adc_range: float = 10.0  # V, 12-bit over +-10 V; rigs.md §3 [choice]
     camera_error: float = 0.003  # m, uniform +-; rigs.md §3 [choice]

@@ -46,6 +46,7 @@ class Rig:
     name: str
     channels: tuple[str, ...]
     command_channels: tuple[str, ...]
+    command_actuators: dict[str, int]  # command channel -> actuator id
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, params, noise: bool, seed: int):
         self.model, self.data, self.p = model, data, params
@@ -83,6 +84,7 @@ class LaserArmRig(Rig):
         super().__init__(model, data, params, noise, seed)
         self._hub_q, self._hub_v = self._qpos("hub"), self._dof("hub")
         self._motor = model.actuator("motor").id if self._hub_q is not None else None
+        self.command_actuators = {} if self._motor is None else {"voltage_cmd": self._motor}
         self._length = params.beam.length
         self._tip_noise = self.noise * params.noise_tip_sensor
         self._current_noise = self.noise * params.noise_current
@@ -138,6 +140,7 @@ class WatflexRig(Rig):
         self._joint_q = {j: self._qpos(j) for j in self.joints}
         self._locked = {j: float(locked.get(j, 0.0)) for j in self.joints}
         self._motor = {j: model.actuator(f"{j}_motor").id for j in self.joints if self._joint_q[j] is not None}
+        self.command_actuators = {f"{j}_torque_cmd": a for j, a in self._motor.items()}
         # per joint: (command channel, volts per N m, converter step in V, lowest and highest code)
         self._dac = {}
         for j, act in (("shoulder", params.shoulder), ("elbow", params.elbow)):

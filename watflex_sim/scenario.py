@@ -29,6 +29,8 @@ DEFAULTS = {
     "noise": True,  # measurement noise of rigs.md §3
     "seed": 0,  # seed of every random draw
     "frame_rate_hz": 50.0,  # Hz, arm drawings sent to rerun
+    "effects": [],  # catalogue effects added to the nominal model (effects.py, recordings.md)
+    "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
     "notes": "",
 }
 
@@ -117,6 +119,10 @@ def check(scenario: dict) -> dict:
         raise ConfigError(f"friction must be 'nominal' or 'none', got {scenario['friction']!r}")
     if not isinstance(scenario["joint_friction"], dict):
         raise ConfigError("joint_friction must be a table joint = {field = value}")
+    if not isinstance(scenario["effects"], list) or not all(isinstance(e, dict) for e in scenario["effects"]):
+        raise ConfigError("effects must be a list of tables {effect = ..., where = ..., <parameters>}")
+    if not isinstance(scenario["parameters"], dict):
+        raise ConfigError("parameters must be a table name = ratio")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):
