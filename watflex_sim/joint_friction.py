@@ -128,6 +128,7 @@ class FrictionCallback:
             self.joints.append([dof, int(model.jnt_qposadr[jid]), law, {"rest": 0.0, "z": 0.0}])
             model.dof_frictionloss[dof] = law.breakaway(+1) if law.law == "exponential" else 0.0
         self._previous = None
+        self._time = math.nan  # simulation time of the last evaluation (s)
 
     def __enter__(self) -> "FrictionCallback":
         self._previous = mujoco.get_mjcb_passive()
@@ -140,14 +141,19 @@ class FrictionCallback:
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         if d is not self.data:
             return
+        # States advance once per physics step, however often MuJoCo evaluates passive forces
+        # (RK4, an extra mj_forward): a repeated evaluation at the same time reuses them.
+        advance = d.time != self._time
+        self._time = d.time
         dt = self.dt
         for joint in self.joints:
             dof, qadr, law, state = joint
             v = d.qvel[dof].item()
             torque = 0.0  # N m, added to the joint (the friction felt, i.e. -F)
             if law.law == "lugre":
-                friction, state["z"] = lugre_step(v, state["z"], dt, law.sigma0, law.sigma1, law.positive, law.negative)
-                torque -= friction
+                if advance:
+                    state["F"], state["z"] = lugre_step(v, state["z"], dt, law.sigma0, law.sigma1, law.positive, law.negative)
+                torque -= state.get("F", 0.0)
             else:
                 if v > V_REST:
                     direction = 1
@@ -156,7 +162,8 @@ class FrictionCallback:
                 else:  # at rest: the direction the joint is pushed, against the holding force
                     direction = 1 if d.qfrc_constraint[dof] <= 0 else -1
                 p = law.positive if direction > 0 else law.negative
-                state["rest"] = state["rest"] + dt if abs(v) < V_REST else 0.0
+                if advance:
+                    state["rest"] = state["rest"] + dt if abs(v) < V_REST else 0.0
                 level = stribeck_level(abs(v), p)
                 if law.dwell_gain:
                     level *= 1.0 + law.dwell_gain * (1.0 - math.exp(-state["rest"] / law.dwell_time))
