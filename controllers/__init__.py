@@ -1,10 +1,13 @@
 """Controllers, one module each, all run every 1 ms on measured channels (see base.Controller)."""
 from .base import Controller
+from .cascade_p import CascadeP
 from .open_loop import OpenLoop
 from .pd_joint import PDJoint
 from .pd_tip import PDTip
+from .pi_velocity import PIVelocity
 
 # controller.type in a scenario or sidecar -> class taking the table's other keys as arguments
-CONTROLLERS = {"pd_tip": PDTip, "pd_joint": PDJoint}
+CONTROLLERS = {"pd_tip": PDTip, "pd_joint": PDJoint, "cascade_p": CascadeP}
+CONTROLLERS["pi_velocity"] = PIVelocity  # thesis 4.5.4 friction map (gain-scheduled PI velocity)
 
-__all__ = ["Controller", "OpenLoop", "PDJoint", "PDTip", "CONTROLLERS"]
+__all__ = ["CascadeP", "Controller", "OpenLoop", "PDJoint", "PDTip", "PIVelocity", "CONTROLLERS"]
