@@ -12,7 +12,7 @@ import math
 
 import mujoco
 
-from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, LaserArm, Watflex
+from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, Emps, LaserArm, Watflex
 
 BEAM_RGBA = [0.75, 0.78, 0.82, 1]
 RIGID_RGBA = [0.3, 0.3, 0.35, 1]
@@ -193,4 +193,28 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     return spec
 
 
-BUILDERS = {"laser_arm": build_laser_arm, "watflex": build_watflex}
+def build_emps(p: Emps) -> mujoco.MjSpec:
+    """EMPS: a carriage of mass M on a slide `carriage` (x, m) with viscous friction, driven by force."""
+    spec = _spec("emps", p.timestep)
+    spec.worldbody.add_light(name="top", pos=[0, 0, 2], dir=[0, 0, -1])
+    rail = spec.worldbody.add_geom(name="rail", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.15, 0.01, 0.005], pos=[0.12, 0, 0])
+    rail.contype = rail.conaffinity = 0
+    rail.rgba = RIGID_RGBA
+    carriage = spec.worldbody.add_body(name="carriage_body", pos=[0, 0, 0.03])
+    j = carriage.add_joint(name="carriage", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+    j.damping = [p.viscous, 0, 0]  # N s/m
+    j.solref_friction = list(STICK_SOLREF)
+    j.solimp_friction = list(STICK_SOLIMP)
+    g = carriage.add_geom(name="carriage", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03, 0.03, 0.02])
+    g.mass = p.mass  # kg, all moving parts referred to the load
+    g.contype = g.conaffinity = 0
+    g.rgba = MASS_RGBA
+    carriage.add_site(name="tip", size=[0.005, 0, 0])
+    drive = spec.add_actuator(name="drive", target="carriage", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    limit = p.drive_gain * p.command_limit
+    drive.ctrlrange = [-limit, limit]  # N
+    spec.add_key(name="home")
+    return spec
+
+
+BUILDERS = {"laser_arm": build_laser_arm, "watflex": build_watflex, "emps": build_emps}

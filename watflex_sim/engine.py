@@ -16,12 +16,23 @@ from .joint_friction import FrictionCallback, configure, nominal_frictions, patc
 from .model import ConfigError, load_model, rig_params
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
-from .rigs import LaserArmRig, WatflexRig
+from .rigdesc import load_rig
+from .rigs import GenericRig, LaserArmRig, WatflexRig
 from .signals import make_signal
 
 log = logging.getLogger(__name__)
 
-RIG_CLASSES = {"laser_arm": LaserArmRig, "watflex": WatflexRig}
+RIG_CLASSES = {"laser_arm": LaserArmRig, "watflex": WatflexRig}  # sensor implementations by name
+
+
+def make_rig(scenario: dict, model: mujoco.MjModel, data: mujoco.MjData):
+    """The rig's sensors and actuators, as its description (rigs/<rig>.toml) names them."""
+    rig_name = scenario["rig"]
+    description = load_rig(rig_name)
+    if description.sensors == "generic":
+        return GenericRig(model, data, description, scenario["noise"], scenario["seed"])
+    kwargs = {"locked": scenario["locked_joints"]} if description.sensors == "watflex" else {}
+    return RIG_CLASSES[description.sensors](model, data, rig_params(rig_name), scenario["noise"], scenario["seed"], **kwargs)
 
 
 class SimulationError(RuntimeError):
@@ -166,10 +177,7 @@ class ControlLoop:
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
-        kwargs = {"locked": scenario["locked_joints"]} if rig_name == "watflex" else {}
-        self.rig = RIG_CLASSES[rig_name](
-            self.model, self.data, rig_params(rig_name), scenario["noise"], scenario["seed"], **kwargs
-        )
+        self.rig = make_rig(scenario, self.model, self.data)
         frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
@@ -178,7 +186,7 @@ class ControlLoop:
         self.controller = make_controller(scenario, rig_name)
         self.controller.reset()
         references = _references(scenario, rig_name)
-        unknown = set(references) - {c for c in self.rig.channels if c.endswith("reference")}
+        unknown = set(references) - set(self.rig.input_channels)
         if unknown:
             raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
         self.n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
@@ -231,13 +239,14 @@ class ControlLoop:
         return obs
 
 
-def simulate(scenario: dict, progress: Callable[[float], None] | None = None) -> SimResult:
+def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
+             parameter_names: dict[str, tuple[str, str]] | None = None) -> SimResult:
     """Run a checked scenario (scenario.load_scenario) and return its recording and drawings.
 
     Raises ConfigError for an impossible configuration and SimulationError on divergence.
     `progress(fraction)` is called about every simulated 0.1 s.
     """
-    loop = ControlLoop(scenario)
+    loop = ControlLoop(scenario, parameter_names)
     rig, n_ticks = loop.rig, loop.n_ticks
     rows = []
     frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * CONTROL_PERIOD))))

@@ -39,6 +39,8 @@ def lugre_step(v: float, z: float, dt: float, sigma0: float, sigma1: float,
     """
     p = positive if v >= 0 else negative
     g = stribeck_level(abs(v), p, delta)
+    if g <= 0.0:  # no dry friction: no bristles to deflect
+        return p.alpha2 * v, 0.0
     rate = sigma0 * abs(v) / g  # 1/s
     if rate * dt > 1e-12:
         z_ss = g / sigma0 * (1.0 if v > 0 else -1.0)

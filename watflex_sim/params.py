@@ -189,6 +189,23 @@ class Watflex:
     timestep: float = 5e-4  # s [ours] README "Time step"
 
 
+@dataclass(frozen=True)
+class Emps:
+    """EMPS ball-screw drive (shared/realdata/emps/ABOUT.md, Janot et al. 2019), load side.
+
+    The nominal model is a mass with viscous friction only (issue 5): rough datasheet-like
+    values [ours], not the published estimates the diagnosis must find (M = 95.11 kg,
+    Fv = 203.5 N s/m); the rig description lets the refit move them by +-25 %.
+    """
+
+    mass: float = 100.0  # kg [ours: nominal guess]
+    viscous: float = 180.0  # N s/m [ours: nominal guess]
+    drive_gain: float = 35.15065188  # N/V, `gtau` in the data files (ABOUT.md)
+    command_limit: float = 10.0  # V, drive saturation in the authors' simulator (ABOUT.md)
+    timestep: float = 5e-4  # s [ours]: 2 physics steps per 1 ms sample; dry friction sticks hard
+
+
 LASER_ARM = LaserArm()
 WATFLEX = Watflex()
-RIGS = {"laser_arm": LASER_ARM, "watflex": WATFLEX}
+EMPS = Emps()
+RIGS = {"laser_arm": LASER_ARM, "watflex": WATFLEX, "emps": EMPS}

@@ -20,22 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .rigdesc import channel_units
+
 FORMAT = "flexarm-recording/1"
 
-# rig -> {channel: SI unit}, the vocabulary table of recordings.md section 1.
-CHANNELS: dict[str, dict[str, str]] = {
-    "laser_arm": {"reference": "rad", "hub_angle": "rad", "tip_sensor": "V",
-                  "voltage_cmd": "V", "motor_current": "A"},
-    "watflex": {"shoulder_reference": "rad", "elbow_reference": "rad",
-                "shoulder_angle": "rad", "elbow_angle": "rad",
-                "shoulder_torque_cmd": "N m", "elbow_torque_cmd": "N m",
-                "strain_1A": "V", "strain_1B": "V", "strain_1C": "V",
-                "strain_2A": "V", "strain_2B": "V", "tip_x": "m", "tip_y": "m"},
-}
+# rig -> {channel: SI unit}: recordings.md section 1's vocabulary, from the rig descriptions (rigs/*.toml).
+CHANNELS: dict[str, dict[str, str]] = channel_units()
 
 # A CSV cell: a decimal number, or nan/inf (nan is read as a missing sample like an empty cell).
 _NUMBER = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.I)
-
 
 class RecordingError(ValueError):
     """Bad recording or sidecar. ``str(err)`` is one line: ``<file>: <cause>``."""
@@ -322,23 +315,33 @@ def _check_mat(raw: bytes, source) -> None:
 
 
 def _read_mat(raw: bytes, rig: str, source):
-    """Load a MATLAB file; return (time, channels, where) with ``where(i)`` = 'sample i'."""
+    """Load a MATLAB file; return (time, channels, where, scalars) with ``where(i)`` = 'sample i'.
+
+    The time variable and the 1x1 scalars a rig exports beside its channels (e.g. EMPS's
+    controller gains) are named by the rig description (`time_variable`, `mat_scalars`).
+    """
     import scipy.io
 
+    from .rigdesc import load_rig
+
+    description = load_rig(rig)
     _check_mat(raw, source)
     try:
         mat = scipy.io.loadmat(io.BytesIO(raw))
     except Exception as err:  # scipy raises a zoo of types on corrupt files
         cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
-    names = [k for k in mat if not k.startswith("__")]
-    if "time" not in names:
-        raise RecordingError(source, "no 'time' variable")
-    _check_names([n for n in names if n != "time"], rig, source)
-    time = _as_vector(mat["time"], "time", source, squeeze=True)
+    time_name = description.time_variable
+    scalars = {n: float(np.asarray(mat[n]).ravel()[0]) for n in description.mat_scalars
+               if n in mat and np.asarray(mat[n]).size == 1}
+    names = [k for k in mat if not k.startswith("__") and k not in scalars]
+    if time_name not in names:
+        raise RecordingError(source, f"no {time_name!r} variable")
+    _check_names([n for n in names if n != time_name], rig, source)
+    time = _as_vector(mat[time_name], time_name, source, squeeze=True)
     chans = {n: _as_vector(mat[n], f"variable {n!r}", source, squeeze=True)
-             for n in names if n != "time"}
-    return time, chans, lambda i: f"sample {i}"
+             for n in names if n != time_name}
+    return time, chans, lambda i: f"sample {i}", scalars
 
 
 def read_recording(path, sidecar: dict | None = None) -> Recording:
@@ -355,7 +358,23 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
     raw = _read_bytes(path, source)
     meta = _load_sidecar(path) if sidecar is None else copy.deepcopy(sidecar)
     rig = _check_meta(meta, path.with_suffix(".json") if sidecar is None else source, True)
-    reader = _read_csv if suffix == ".csv" else _read_mat
-    time, chans, where = reader(raw, rig, source)
+    if suffix == ".csv":
+        time, chans, where = _read_csv(raw, rig, source)
+    else:
+        time, chans, where, scalars = _read_mat(raw, rig, source)
+        meta = _fill_scalars(meta, scalars, source)
     _check_samples(time, chans, source, where)
     return Recording(time, chans, meta)
+
+
+def _fill_scalars(meta, scalars: dict, source):
+    """Replace sidecar strings "mat:NAME" (at any depth) by the .mat scalar NAME."""
+    if isinstance(meta, dict):
+        return {k: _fill_scalars(v, scalars, source) for k, v in meta.items()}
+    if isinstance(meta, list):
+        return [_fill_scalars(v, scalars, source) for v in meta]
+    if isinstance(meta, str) and meta.startswith("mat:"):
+        if meta[4:] not in scalars:
+            raise RecordingError(source, f"the sidecar asks for {meta!r} but the file has no such scalar")
+        return scalars[meta[4:]]
+    return meta

@@ -64,6 +64,11 @@ class Rig:
         points = self.data.xpos[self._draw_bodies]
         return points.copy() if self._tip_xpos is None else np.vstack([points, self._tip_xpos])
 
+    @property
+    def input_channels(self) -> tuple[str, ...]:
+        """Channels given from outside the loop (references, disturbances), not measured."""
+        return tuple(c for c in self.channels if c.endswith("reference"))
+
     def _qpos(self, joint: str) -> int | None:
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
         return None if jid < 0 else int(self.model.jnt_qposadr[jid])
@@ -223,4 +228,53 @@ class WatflexRig(Rig):
             else:
                 torque = 0.0
             out[channel] = torque
+        return out
+
+
+class GenericRig(Rig):
+    """A rig from its description alone (rigdesc): joint-position sensors, commands, references
+    and disturbances as the channel table says (rigs/emps.toml is one)."""
+
+    def __init__(self, model, data, description, noise: bool, seed: int):
+        super().__init__(model, data, description, noise, seed)
+        self.name = description.name
+        self.channels = tuple(description.channels)
+        self.command_channels = tuple(description.of_kind("command"))
+        self._inputs = tuple(description.of_kind("reference") + description.of_kind("disturbance"))
+        self._measured, self._commands, self._disturbances = [], {}, {}
+        for channel, spec in description.channels.items():
+            if spec["kind"] == "measured":
+                q = self._qpos(spec["joint"])
+                if q is None:
+                    continue
+                self._measured.append((channel, q, float(spec.get("step", 0.0)), self.noise * float(spec.get("noise", 0.0))))
+            elif spec["kind"] == "command":
+                self._commands[channel] = (model.actuator(spec["actuator"]).id, float(spec.get("gain", 1.0)),
+                                           float(spec.get("limit", math.inf)))
+            elif spec["kind"] == "disturbance":
+                self._disturbances[channel] = self._dof(spec["joint"])
+        self.command_actuators = {c: a for c, (a, _g, _l) in self._commands.items()}
+
+    @property
+    def input_channels(self) -> tuple[str, ...]:
+        return self._inputs
+
+    def observe(self, reference: dict[str, float]) -> dict[str, float]:
+        """References and disturbances as given (disturbances also applied as force), then positions."""
+        obs = {c: reference.get(c, 0.0) for c in self._inputs}
+        for channel, dof in self._disturbances.items():
+            self.data.qfrc_applied[dof] = obs[channel]
+        qpos = self.data.qpos.tolist()
+        for channel, q, step, noise in self._measured:
+            value = qpos[q] + (noise * self.gauss() if noise else 0.0)
+            obs[channel] = quantise(value, step) if step else value
+        return obs
+
+    def actuate(self, command: dict[str, float]) -> dict[str, float]:
+        """Each command clipped to its limit (its unit), times its gain into the actuator."""
+        out = {}
+        for channel, (actuator, gain, limit) in self._commands.items():
+            u = clip(float(command.get(channel, 0.0)), limit)
+            self.data.ctrl[actuator] = gain * u
+            out[channel] = u
         return out

@@ -6,6 +6,7 @@ from typing import Callable
 import numpy as np
 
 from .model import ConfigError
+from .params import CONTROL_PERIOD
 
 
 def _number(spec: dict, key: str, default=None) -> float:
@@ -61,8 +62,23 @@ def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[
             return k * value
 
         return triangle
+    if kind == "samples":  # a recorded signal, held from one sample to the next (zero-order hold);
+        # a sample stamped up to half a control period late still counts for that period (logged
+        # time stamps jitter: EMPS's 0.00100002 s is the sample of the 1 ms period)
+        times = np.asarray(spec.get("time_s", []), dtype=float)
+        values = np.asarray(spec.get("values", []), dtype=float)
+        if times.size == 0 or times.size != values.size:
+            raise ConfigError("signal 'samples': 'time_s' and 'values' must be equal, non-empty lists")
+        finite = np.isfinite(values)
+        times, values = times[finite], k * values[finite]
+
+        def held(t: float) -> float:
+            i = int(np.searchsorted(times, t + 0.5 * CONTROL_PERIOD, side="right")) - 1
+            return float(values[max(i, 0)])
+
+        return held
     if kind == "constant":
         value = k * _number(spec, "value")
         return lambda t: value
-    raise ConfigError(f"unknown signal kind {kind!r} (known: step, staircase, triangle, constant)")
+    raise ConfigError(f"unknown signal kind {kind!r} (known: step, staircase, triangle, constant, samples)")
 
