@@ -9,5 +9,11 @@ from .pi_velocity import PIVelocity
 # controller.type in a scenario or sidecar -> class taking the table's other keys as arguments
 CONTROLLERS = {"pd_tip": PDTip, "pd_joint": PDJoint, "cascade_p": CascadeP}
 CONTROLLERS["pi_velocity"] = PIVelocity  # thesis 4.5.4 friction map (gain-scheduled PI velocity)
+from .fuzzy_pd import FuzzyPD  # noqa: E402
+CONTROLLERS["fuzzy_pd"] = FuzzyPD  # laser_arm_paper 2.4 fuzzy PD on the tip sensor
+from .observer import Observer, make_observer  # noqa: E402
+from .passivity import Passivity, make_passivity  # noqa: E402
+CONTROLLERS["observer"] = make_observer  # thesis 5.2 observer-based recursive joint control
+CONTROLLERS["passivity"] = make_passivity  # thesis 5.1 passivity-based Cartesian PD
 
 __all__ = ["CascadeP", "Controller", "OpenLoop", "PDJoint", "PDTip", "PIVelocity", "CONTROLLERS"]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import sys
@@ -61,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-rrd", action="store_true", help="do not write a rerun recording")
     run.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
     run.add_argument("--spawn", action="store_true", help="also open the rerun viewer (needs a display)")
+    run.add_argument("--patch", type=Path, help="a diagnosis' patch.json: simulate with its effects and refit parameters")
 
     view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)")
     _add_scenario_args(view)
@@ -70,6 +72,31 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--png", type=Path, help="PNG path (default NAME.png beside the recording)")
     plot.add_argument("--rrd", type=Path, help="also write a rerun recording here")
     plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
+
+    diag = sub.add_parser(
+        "diagnose", help="find where recordings and the model differ, name the missing physics, fit it",
+        description="Diagnose recordings of one rig against its nominal model (recordings.md section 2): "
+        "re-simulate, refit parameters within tolerance, locate the mismatch, fit catalogue effects, keep "
+        "what improves held-out data. Writes DIR/report.json, fit_*.png, diagnosis.rrd, patched_model.xml, patch.json.")
+    diag.add_argument("recordings", nargs="+", type=Path, help="NAME.csv or NAME.mat, each with NAME.json beside it")
+    diag.add_argument("--report", required=True, type=Path, help="output directory (created)")
+    diag.add_argument("--rig", help="rig whose default sidecar (rigs/RIG.toml) serves files that come without one, e.g. emps")
+    diag.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes fitting candidates (default: all cores)")
+    diag.add_argument("--max-effects", type=int, default=2, help="findings at most (default 2)")
+    diag.add_argument("--no-rrd", action="store_true", help="do not write diagnosis.rrd")
+
+    batch = sub.add_parser(
+        "batch", help="run a sweep file: one scenario over varied parameters; DIR/results.parquet + .csv",
+        description="Run every run of a sweep file (README 'Sweeps'; examples in sweeps/) on a local process "
+        "pool or on Ray, one row per run in DIR/results.parquet and DIR/results.csv, DIR/summary.png. Re-running "
+        "the same command resumes: finished runs (DIR/runs.jsonl) are skipped.")
+    batch.add_argument("sweep", type=Path, help="sweep file (.toml): scenario, method, [fixed], [parameters]")
+    batch.add_argument("--out", required=True, type=Path, help="output directory (created; the same one resumes)")
+    batch.add_argument("--workers", type=int, help="processes of the local pool; with --ray local, CPUs (default: all cores)")
+    batch.add_argument("--ray", metavar="ADDRESS", help="run as Ray tasks: 'auto' (the running cluster), 'local' "
+                       "(start one here) or HOST:PORT; needs pip install 'watflex-sim[cluster]'")
+    batch.add_argument("--keep-recordings", action="store_true", help="write each run's recording to DIR/recordings/RUN_ID.csv/.json")
+    batch.add_argument("--no-plot", action="store_true", help="do not write DIR/summary.png")
 
     sub.add_parser("list", help="list the scenarios shipped in scenarios/")
     return parser
@@ -84,6 +111,13 @@ def _log_rerun(rec: Recording, rrd: Path | None, spawn: bool, frames=None, frame
 
 def cmd_run(args) -> int:
     scenario = load_scenario(args.scenario, args.overrides)
+    if args.patch:
+        try:
+            patch = json.loads(args.patch.read_text())
+            scenario["effects"] = list(scenario["effects"]) + list(patch["effects"])
+            scenario["parameters"] = {**scenario["parameters"], **patch["parameters"]}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"{args.patch}: not a diagnosis patch.json ({exc})".replace("\n", " ")) from None
     name = scenario["name"]
     bar = ProgressBar(name, sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
     result = simulate(scenario, progress=bar)
@@ -128,13 +162,63 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    from .diagnose import diagnose
+    from .report import summary, write_report
+    from .rigdesc import load_rig
+
+    sidecar = None
+    if args.rig:
+        sidecar = load_rig(args.rig).sidecar
+        if sidecar is None:
+            raise ConfigError(f"rig {args.rig!r} has no default sidecar in rigs/{args.rig}.toml")
+    recordings = []
+    for path in args.recordings:
+        own = path.with_suffix(".json")
+        recordings.append(read_recording(path, sidecar=None if own.exists() or sidecar is None else sidecar))
+    start = time.perf_counter()
+    say = (lambda m: print(f"[{time.perf_counter() - start:6.1f} s] {m}", file=sys.stderr, flush=True))
+    report = diagnose(recordings, [p.name for p in args.recordings], workers=max(1, args.workers),
+                      max_effects=args.max_effects, progress=say)
+    path = write_report(report, recordings, args.report, rrd=not args.no_rrd)
+    print(summary(report))
+    print(f"wrote {path} ({time.perf_counter() - start:.1f} s)")
+    return 0
+
+
+def cmd_batch(args) -> int:
+    from .batch import load_sweep, run_sweep
+
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    sweep = load_sweep(args.sweep)
+    bar = ProgressBar("batch", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
+
+    def progress(done: int, total: int) -> None:
+        bar.label = f"batch {done}/{total}"
+        bar(done / total)
+
+    try:
+        result = run_sweep(sweep, args.out, workers=args.workers, ray_address=args.ray,
+                           keep_recordings=args.keep_recordings, progress=progress, plots=not args.no_plot)
+    except KeyboardInterrupt:
+        print(f"\nwatflex-sim: interrupted; finished runs kept in {args.out / 'results.parquet'} (and .csv); "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
+    print(f"{result.ran} runs done ({result.failed} failed), {result.skipped} already done; wrote {result.results} "
+          f"and results.csv ({len(result.rows)} rows) in {result.wall_s:.1f} s")
+    return 0
+
+
 def cmd_list(args) -> int:
     for name in available():
         print(name)
     return 0
 
 
-COMMANDS = {"run": cmd_run, "view": cmd_view, "plot": cmd_plot, "list": cmd_list}
+COMMANDS = {"run": cmd_run, "view": cmd_view, "plot": cmd_plot, "list": cmd_list, "diagnose": cmd_diagnose}
+
+COMMANDS["batch"] = cmd_batch
 
 
 def main(argv: list[str] | None = None) -> int:

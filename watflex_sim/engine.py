@@ -158,7 +158,8 @@ class ControlLoop:
         self.scenario = scenario
         rig_name = scenario["rig"]
         self.patch = patch = Patch()
-        apply_parameters(patch, scenario["parameters"], parameter_names or {})
+        names = parameter_names if parameter_names is not None else load_rig(rig_name).parameter_knobs()
+        apply_parameters(patch, scenario["parameters"], names)
         apply_effects(patch, scenario["effects"])
         self.model = load_model(
             rig_name,
@@ -196,7 +197,8 @@ class ControlLoop:
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
         self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
         self._sensor_fifo = {c: [math.nan] * n for c, n in patch.sensor_delay.items() if n > 0}
-        self._actuators = {c: a for c, a in self.rig.command_actuators.items() if c in patch.actuator}
+        self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
+                           for c, a in self.rig.command_actuators.items() if c in patch.actuator}
 
     def __enter__(self) -> "ControlLoop":
         self.friction.__enter__()
@@ -216,10 +218,10 @@ class ControlLoop:
         if self._commands:  # delayed plant input; the recorded command is the one computed now
             self._commands.append(command)
             recorded = {**self.rig.actuate(self._commands.pop(0)), **{c: recorded[c] for c in self.rig.command_channels}}
-        for channel, actuator in self._actuators.items():
+        for channel, (actuator, scale) in self._actuators.items():  # effects act in the command's unit
             gain, offset, limit = self.patch.actuator[channel]
-            u = self.data.ctrl[actuator] * gain + offset
-            self.data.ctrl[actuator] = max(-limit, min(limit, u))
+            u = self.data.ctrl[actuator] / scale * gain + offset
+            self.data.ctrl[actuator] = scale * max(-limit, min(limit, u))
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:

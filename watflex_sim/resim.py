@@ -50,9 +50,14 @@ def _samples(channel: str, time: np.ndarray, values: np.ndarray) -> dict:
     return {"channel": channel, "kind": "samples", "time_s": time.tolist(), "values": values.tolist()}
 
 
-def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None = None) -> Recording:
-    """Simulate `rec`'s experiment with `effects` and refit `parameters`; channels sampled at rec.time."""
+def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None = None,
+               until: float | None = None) -> Recording:
+    """Simulate `rec`'s experiment with `effects` and refit `parameters`; channels sampled at rec.time.
+
+    With `until` (s from the start) the simulation stops there; later samples hold its last value."""
     scenario = scenario_from_recording(rec)
+    if until is not None:
+        scenario["duration_s"] = min(scenario["duration_s"], until + 2 * CONTROL_PERIOD)
     scenario["effects"] = list(effects)
     scenario["parameters"] = dict(parameters or {})
     sim = simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording

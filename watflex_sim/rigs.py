@@ -47,6 +47,7 @@ class Rig:
     channels: tuple[str, ...]
     command_channels: tuple[str, ...]
     command_actuators: dict[str, int]  # command channel -> actuator id
+    command_scale: dict[str, float] = {}  # command channel -> actuator input per command unit (1 if absent)
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, params, noise: bool, seed: int):
         self.model, self.data, self.p = model, data, params
@@ -254,6 +255,7 @@ class GenericRig(Rig):
             elif spec["kind"] == "disturbance":
                 self._disturbances[channel] = self._dof(spec["joint"])
         self.command_actuators = {c: a for c, (a, _g, _l) in self._commands.items()}
+        self.command_scale = {c: g for c, (_a, g, _l) in self._commands.items()}
 
     @property
     def input_channels(self) -> tuple[str, ...]:

@@ -1,0 +1,127 @@
+"""Write a diagnosis: report.json (recordings.md schema), before/after plots, a .rrd, the patched model."""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from .effects import Patch, apply_effects, apply_parameters
+from .model import nominal_spec
+from .plot import plot_recording
+from .recording import Recording
+from .rigdesc import load_rig
+
+MAX_PLOTS = 6  # recordings plotted (the first ones)
+
+
+def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
+    """Refit parameters as ratio and, where the model holds it, value and unit (e.g. EMPS mass in kg)."""
+    description = load_rig(rig)
+    spec = nominal_spec(rig)
+    model = spec.compile()
+    out = {}
+    for name, ratio in ratios.items():
+        knob, target = description.parameter_knobs().get(name, (None, None))
+        entry = {"ratio": ratio}
+        if knob == "geom_mass":
+            entry.update(value=float(spec.geom(target).mass) * ratio, unit="kg")
+        elif knob == "damping":
+            entry.update(value=float(model.dof_damping[model.joint(target).dofadr[0]]) * ratio, unit="N s/m or N m s/rad")
+        elif knob == "armature":
+            entry.update(value=float(model.dof_armature[model.joint(target).dofadr[0]]) * ratio, unit="kg m^2")
+        out[name] = entry
+    return out
+
+
+def patched_spec(rig: str, patch_spec: dict) -> mujoco.MjSpec:
+    """The nominal model with the found physics' model changes and refit parameters applied.
+
+    Friction found on a joint is written as its frictionloss (the break-away level); laws, sensor
+    and actuator changes live in patch.json, which `watflex-sim run --patch` applies."""
+    spec = nominal_spec(rig)
+    patch = Patch()
+    apply_parameters(patch, patch_spec.get("parameters", {}), load_rig(rig).parameter_knobs())
+    apply_effects(patch, patch_spec.get("effects", []))
+    for edit in patch.spec_edits:
+        edit(spec)
+    for joint, changes in patch.friction_add.items():
+        j = spec.joint(joint)
+        if j is not None:
+            j.frictionloss += max(changes.get(("positive", "alpha0"), 0.0), changes.get(("negative", "alpha0"), 0.0))
+    return spec
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def write_report(report: dict, recordings: list[Recording], directory: Path, rrd: bool = True) -> Path:
+    """Write everything into `directory` (created); returns the report.json path.
+
+    Files are written under temporary names and renamed, report.json last, so a failure never
+    leaves a report that claims files which are not there."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    sims = report.pop("sims")
+    out = dict(report)
+    out["refit_parameters"] = parameter_values(report["rig"], report["refit_parameters"])
+    figures = []
+    for i, (rec, name) in enumerate(zip(recordings, report["recordings"])):
+        if i >= MAX_PLOTS:
+            break
+        png = directory / f"fit_{Path(name).stem}.png"
+        plot_recording(rec, png, {"nominal model": sims["nominal"][i], "diagnosed model": sims["final"][i]},
+                       title=f"{name}: measured (solid), nominal and diagnosed models (dashed)")
+        figures.append(png.name)
+    out["figures"] = figures
+    if rrd:
+        from .rerun_log import log_run
+
+        channels, units, time = {}, {}, recordings[0].time - recordings[0].time[0]
+        first, unit_of = recordings[0], recordings[0].units()
+        for label, rec in (("measured", first), ("nominal", sims["nominal"][0]), ("diagnosed", sims["final"][0])):
+            for c, v in rec.channels.items():
+                channels[f"{c}.{label}"] = np.interp(time, rec.time - rec.time[0], v)
+                units[f"{c}.{label}"] = unit_of.get(c, "")
+        log_run(time, channels, units, rrd_path=directory / "diagnosis.rrd", recording_name=f"diagnosis {report['recordings'][0]}")
+        out["rrd"] = "diagnosis.rrd"
+    spec = patched_spec(report["rig"], report["patch"])
+    _atomic_write(directory / "patched_model.xml", spec.to_xml())
+    _atomic_write(directory / "patch.json", json.dumps(report["patch"], indent=2) + "\n")
+    out["patched_model"] = str(directory / "patched_model.xml")
+    path = directory / "report.json"
+    _atomic_write(path, json.dumps(out, indent=2, default=float) + "\n")
+    report["sims"] = sims
+    return path
+
+
+def summary(report: dict) -> str:
+    """The human summary printed by `watflex-sim diagnose`."""
+    lines = [f"rig {report['rig']}: {len(report['recordings'])} recording(s)",
+             f"nominal model: NRMSE {report['fit_before']['nrmse']:.4f}, correlation {report['fit_before']['correlation']:.4f}"]
+    for w in report["mismatch"][:3]:
+        lines.append(f"  mismatch: {w['channel']} in {w['recording']} {w['t_start']:.2f}-{w['t_end']:.2f} s "
+                     f"({w['regime']}), {w['score']:.2f} of its spread")
+    if report["refit_parameters"]:
+        lines.append("refit within tolerance: " + ", ".join(f"{k} x{v:.4f}" for k, v in report["refit_parameters"].items()))
+    if not report["findings"]:
+        lines.append("findings: nothing missing - the nominal model, refit within its tolerances, explains the data to within its noise")
+    for i, f in enumerate(report["findings"], 1):
+        lines.append(f"finding {i}: {f['effect']} at {f['where']} ({f['direction']}): {f['explanation']}")
+        lines.append(f"  evidence: {f['evidence']}")
+    for r in report.get("rejected", []):
+        if r.get("train_gain", 0) > 0 and r.get("held_out_gain", 0) > 0:
+            lines.append(f"below the bar: {r['effect']} at {r['where']} improves training by {100 * r['train_gain']:.1f} % "
+                         f"and held-out by {100 * r['held_out_gain']:.1f} %, less than its parameters' cost")
+    ho = report["held_out"]
+    lines.append(f"held-out NRMSE {ho['before']['nrmse']:.4f} -> {ho['after']['nrmse']:.4f} ({ho['how']})")
+    lines.append(f"all data: NRMSE {report['fit_before']['nrmse']:.4f} -> {report['fit_after']['nrmse']:.4f}, "
+                 f"correlation {report['fit_before']['correlation']:.4f} -> {report['fit_after']['correlation']:.4f}")
+    return "\n".join(lines)
