@@ -514,7 +514,8 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
     `keep_recordings` DIR/recordings/RUN_ID.csv/.json. `progress(done, to_do)` after each run.
     Run ids hash the base scenario and the values (and, random/lhs, the sample's index).
     Raises ConfigError for a bad sweep or a missing Ray; KeyboardInterrupt passes through after
-    the finished rows are written."""
+    the finished rows are written. From a script, call it under `if __name__ == "__main__":`
+    (the workers import the main module, as multiprocessing's forkserver and spawn do)."""
     sweep = sweep if isinstance(sweep, Sweep) else load_sweep(sweep)
     if ray_address:
         try:
@@ -522,7 +523,7 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
         except ImportError:
             raise ConfigError("--ray needs Ray: pip install 'watflex-sim[cluster]'") from None
     out, keys, t0 = Path(out), list(sweep.parameters), time.perf_counter()
-    base = json.dumps(sweep.base, sort_keys=True, default=str)
+    base = hashlib.sha1(json.dumps(sweep.base, sort_keys=True, default=str).encode()).hexdigest()
 
     def run_id(i: int, values: dict) -> str:
         text = json.dumps([base, values, None if sweep.method == "grid" else i], sort_keys=True, default=str)
@@ -536,7 +537,7 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
     done = read_journal(journal_path)
     skipped = sum(1 for r in ids if r in done)
     to_do, state = len(ids) - skipped, {"ran": 0, "failed": 0, "next": time.monotonic() + CHECKPOINT_S}
-    keep = out / "recordings" if keep_recordings else None
+    keep = out.resolve() / "recordings" if keep_recordings else None
 
     def tasks() -> Iterator[dict]:
         for i, values in enumerate(points(sweep)):

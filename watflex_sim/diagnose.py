@@ -76,11 +76,12 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         channels.append(chans)
         scale.append(spread)
         floor.append({c: float(rig.channels[c].get("noise", 0.0)) / spread[c] for c in chans})
-    if len(recordings) >= 2:
+    if len(recordings) >= 2:  # the last recording is held out, so every other condition is fitted
+        last = len(recordings) - 1
         for i, rec in enumerate(recordings):
-            train.append((rec.time - rec.time[0] < FIT_SECONDS) & (i % 2 == 0))
-        how = (f"fit on the first {FIT_SECONDS:g} s of " + ", ".join(names[::2]) + "; judged on "
-               + ", ".join(names[1::2]) + " and the rest of the others")
+            train.append((rec.time - rec.time[0] < FIT_SECONDS) & (i != last))
+        how = (f"fit on the first {FIT_SECONDS:g} s of " + ", ".join(names[:-1]) + f"; judged on {names[-1]}"
+               + " and the rest of the others")
     else:
         t = recordings[0].time - recordings[0].time[0]
         train.append((t // BLOCK_S) % 2 == 0)
@@ -440,7 +441,7 @@ def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, ma
         screened.sort(key=lambda r: r["cost"])
         say(f"round {round_ + 1}: fitting the best {screen}: " + ", ".join(f"{r['effect']}@{r['where']}" for r in screened[:screen]))
         fitted = [r for r in run_candidates(data, current, [(r["effect"], r["where"]) for r in screened[:screen]],
-                                            workers, budget=20, joint=True) if "error" not in r]
+                                            workers, budget=12, joint=True) if "error" not in r]
         if not fitted:
             break
         train_now = fit_scores(data, sims, "train")["nrmse"]

@@ -222,6 +222,7 @@ class ControlLoop:
             gain, offset, limit = self.patch.actuator[channel]
             u = self.data.ctrl[actuator] / scale * gain + offset
             self.data.ctrl[actuator] = scale * max(-limit, min(limit, u))
+        recorded.update(self.rig.monitor())
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:

@@ -19,10 +19,14 @@ def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = N
     One panel per group (angles, strains, commands, sensors) and unit; each panel's y label
     carries the unit. Returns the path written.
     """
+    from .rigdesc import load_rig
+
     units = rec.units()
+    kinds = {c: spec["kind"] for c, spec in load_rig(rec.rig).channels.items()}
     groups: dict[tuple[str, str], list[str]] = {}
     for name in rec.channels:
-        groups.setdefault((channel_group(name), units.get(name, "")), []).append(name)
+        kind = kinds.get(name, channel_group(name))
+        groups.setdefault((kind, units.get(name, "")), []).append(name)
     fig, axes = plt.subplots(len(groups), 1, figsize=(10, 2.6 * len(groups)), sharex=True, squeeze=False)
     for ax, ((group, unit), names) in zip(axes[:, 0], groups.items()):
         for i, name in enumerate(names):
@@ -31,11 +35,11 @@ def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = N
             ok = np.isfinite(y)
             style = "." if ok.mean() < 0.5 else "-"  # sparse channels (camera) as dots
             ax.plot(rec.time[ok], y[ok], style, color=color, lw=1.2, ms=2, label=name)
-            for label, other in (others or {}).items():
-                if name in other.channels:
+            for (label, other), dash in zip((others or {}).items(), ("--", ":", "-.")):
+                if name in other.channels and kinds.get(name) not in ("reference", "disturbance"):
                     yo = other.channels[name]
                     ok = np.isfinite(yo)
-                    ax.plot(other.time[ok], yo[ok], "--", color=color, lw=1.0, alpha=0.8, label=f"{name} ({label})")
+                    ax.plot(other.time[ok], yo[ok], dash, color=color, lw=1.2, alpha=0.85, label=f"{name} ({label})")
         ax.set_ylabel(f"{group} [{unit}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best", ncol=2)

@@ -78,7 +78,7 @@ def write_report(report: dict, recordings: list[Recording], directory: Path, rrd
             break
         png = directory / f"fit_{Path(name).stem}.png"
         plot_recording(rec, png, {"nominal model": sims["nominal"][i], "diagnosed model": sims["final"][i]},
-                       title=f"{name}: measured (solid), nominal and diagnosed models (dashed)")
+                       title=f"{name}: measured (solid), nominal model (dashed), diagnosed model (dotted)")
         figures.append(png.name)
     out["figures"] = figures
     if rrd:

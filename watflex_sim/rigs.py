@@ -70,6 +70,10 @@ class Rig:
         """Channels given from outside the loop (references, disturbances), not measured."""
         return tuple(c for c in self.channels if c.endswith("reference"))
 
+    def monitor(self) -> dict[str, float]:
+        """Channels measured on the actuators once the commands are applied (none by default)."""
+        return {}
+
     def _qpos(self, joint: str) -> int | None:
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
         return None if jid < 0 else int(self.model.jnt_qposadr[jid])
@@ -94,6 +98,7 @@ class LaserArmRig(Rig):
         self._length = params.beam.length
         self._tip_noise = self.noise * params.noise_tip_sensor
         self._current_noise = self.noise * params.noise_current
+        self._applied = 0.0
 
     def hub_velocity(self) -> float:
         """Hub speed (rad/s); 0 when the hub is locked."""
@@ -121,11 +126,17 @@ class LaserArmRig(Rig):
         return clip((voltage - p.back_emf * self.hub_velocity()) / p.resistance, p.current_limit)
 
     def actuate(self, command: dict[str, float]) -> dict[str, float]:
-        """Saturate the voltage (V), apply it, and return the recorded command and current (A)."""
+        """Saturate the voltage (V), apply it, and return the recorded command."""
         u = clip(float(command.get("voltage_cmd", 0.0)), self.p.voltage_limit)
         if self._motor is not None:
             self.data.ctrl[self._motor] = u
-        return {"voltage_cmd": u, "motor_current": self.current(u) + self._current_noise * self.gauss()}
+        self._applied = u
+        return {"voltage_cmd": u}
+
+    def monitor(self) -> dict[str, float]:
+        """The amplifier's current monitor (A) for the voltage the motor really gets (after effects)."""
+        u = self._applied if self._motor is None else self.data.ctrl[self._motor].item()
+        return {"motor_current": self.current(u) + self._current_noise * self.gauss()}
 
 
 class WatflexRig(Rig):
