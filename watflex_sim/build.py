@@ -141,6 +141,18 @@ def _sticking_friction(joint, friction) -> None:
     joint.solimp_friction = list(STICK_SOLIMP)
 
 
+def _driven_link(body, joint_name: str, actuator, friction, prefix: str, beam, root: float, end: float, p: Watflex):
+    """On `body`: the actuated hinge, the rigid root clamp (m), the flexible chain and the rigid end
+    clamp (m); returns the chain's last body."""
+    j = body.add_joint(name=joint_name, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+    j.armature = actuator.inertia  # kg m^2 at the output, thesis 4.5.6
+    _sticking_friction(j, friction)
+    _rigid_bar(body, f"{prefix}_root_clamp", 0.0, root)
+    tip = add_flexible_chain(body, prefix, beam, p.n_segments, root)
+    _rigid_bar(tip, f"{prefix}_end_clamp", chain_tip_x(beam, p.n_segments), end)
+    return tip
+
+
 def build_watflex(p: Watflex) -> mujoco.MjSpec:
     """Watflex: shoulder fixed to the table, two flexible links, elbow and end effector on air bearings."""
     spec = _spec("watflex", p.timestep)
@@ -155,25 +167,12 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     z = p.bearing_radius  # arm plane height: the bearing spheres rest on the glass
 
     shoulder = spec.worldbody.add_body(name="shoulder_body", pos=[0, 0, z])
-    j = shoulder.add_joint(name="shoulder", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
-    j.armature = p.shoulder.inertia  # kg m^2 at the output, thesis 4.5.6
-    _sticking_friction(j, p.shoulder_friction[0])
-    _rigid_bar(shoulder, "link1_root_clamp", 0.0, p.l1a)
-    tip1 = add_flexible_chain(shoulder, "link1", p.link1, p.n_segments, p.l1a)
-    x1 = chain_tip_x(p.link1, p.n_segments)
-    _rigid_bar(tip1, "link1_end_clamp", x1, p.l1c)
-
-    elbow_housing = tip1.add_body(name="elbow_housing", pos=[x1 + p.l1c, 0, 0])
+    tip1 = _driven_link(shoulder, "shoulder", p.shoulder, p.shoulder_friction[0], "link1", p.link1, p.l1a, p.l1c, p)
+    elbow_housing = tip1.add_body(name="elbow_housing", pos=[chain_tip_x(p.link1, p.n_segments) + p.l1c, 0, 0])
     _bearing(elbow_housing, "elbow", p.elbow.mass, p)
     link2 = elbow_housing.add_body(name="link2_root")
-    j = link2.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
-    j.armature = p.elbow.inertia  # kg m^2 at the output, thesis 4.5.6
-    _sticking_friction(j, p.elbow_friction[0])
-    _rigid_bar(link2, "link2_root_clamp", 0.0, p.l2a)
-    tip2 = add_flexible_chain(link2, "link2", p.link2, p.n_segments, p.l2a)
-    x2 = chain_tip_x(p.link2, p.n_segments)
-    _rigid_bar(tip2, "link2_end_clamp", x2, p.l2c)
-    ee = tip2.add_body(name="end_effector", pos=[x2 + p.l2c, 0, 0])
+    tip2 = _driven_link(link2, "elbow", p.elbow, p.elbow_friction[0], "link2", p.link2, p.l2a, p.l2c, p)
+    ee = tip2.add_body(name="end_effector", pos=[chain_tip_x(p.link2, p.n_segments) + p.l2c, 0, 0])
     _bearing(ee, "end_effector", p.end_effector_mass, p)
     ee.add_site(name="tip", size=[0.01, 0, 0])
 

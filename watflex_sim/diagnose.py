@@ -67,7 +67,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     for rec, name in zip(recordings, names):
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
         wanted = outputs | (set(rig.of_kind("command")) if closed else set())
-        chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10]
+        chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
+                 and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
         if not chans:
             raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
         if rec.time[-1] - rec.time[0] < 0.05:
@@ -305,11 +306,10 @@ WINDOW_S = 0.05  # s, moving-RMS window of the residual
 
 
 def _motion_channel(rec: Recording, rig: RigDescription) -> str | None:
-    """The first measured joint position (rad or m) of the recording: what 'motion' means."""
-    for c in rig.of_kind("measured"):
-        if c in rec.channels and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_"):
-            return c
-    return None
+    """The measured joint position (rad or m) that moves most in the recording: what 'motion' means."""
+    positions = [c for c in rig.of_kind("measured") if c in rec.channels
+                 and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")]
+    return max(positions, key=lambda c: float(np.nanstd(rec.channels[c])), default=None)
 
 
 def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int) -> str:
