@@ -132,11 +132,13 @@ class FrictionCallback:
 
     def __enter__(self) -> "FrictionCallback":
         self._previous = mujoco.get_mjcb_passive()
-        mujoco.set_mjcb_passive(self)
+        if self.joints:  # no friction to apply: no per-step Python call at all
+            mujoco.set_mjcb_passive(self)
         return self
 
     def __exit__(self, *exc) -> None:
-        mujoco.set_mjcb_passive(self._previous)
+        if self.joints:
+            mujoco.set_mjcb_passive(self._previous)
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         if d is not self.data:
