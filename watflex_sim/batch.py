@@ -22,7 +22,6 @@ import signal
 import socket
 import statistics
 import time
-import tomllib
 import uuid
 from dataclasses import dataclass
 from multiprocessing.connection import wait
@@ -34,7 +33,7 @@ import numpy as np
 
 from .engine import ControlLoop, SimulationError, simulate
 from .metrics import step_metrics
-from .model import ConfigError, load_model, rig_params
+from .model import ConfigError, load_model, read_toml, rig_params
 from .recording import write_recording
 from .rigdesc import load_rig
 from .scenario import DEFAULTS, check, load_scenario
@@ -181,11 +180,9 @@ def load_sweep(path) -> Sweep:
     unknown keys or parameters, empty ranges, wrong types, and a first run the engine cannot set up."""
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = read_toml(path, "sweep file")
     except FileNotFoundError:
         raise ConfigError(f"no sweep file {path}") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read sweep file: {exc}".replace("\n", " ")) from None
     try:
         if set(raw) - set(SWEEP_KEYS):
             raise ConfigError(f"unknown sweep key(s) {', '.join(sorted(set(raw) - set(SWEEP_KEYS)))} "

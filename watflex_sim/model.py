@@ -18,6 +18,19 @@ class ConfigError(ValueError):
     """A scenario or option that cannot be simulated; the message is one line."""
 
 
+def read_toml(path: Path, what: str) -> dict:
+    """A TOML file's contents; FileNotFoundError passes through (callers name what is missing),
+    any other failure is a one-line ConfigError naming the file and `what` it should be."""
+    import tomllib
+
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read {what}: {exc}".replace("\n", " ")) from None
+
+
 def rig_params(rig: str):
     """The parameter set of `rig` ('laser_arm' or 'watflex'); ConfigError if unknown."""
     if rig not in RIGS:

@@ -7,11 +7,10 @@ the library (`generic`: encoders, commands, references, disturbances) needs no c
 """
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from functools import cache
 
-from .model import ROOT, ConfigError
+from .model import ROOT, ConfigError, read_toml
 
 RIGS_DIR = ROOT / "rigs"
 KINDS = ("reference", "measured", "command", "disturbance")
@@ -82,11 +81,7 @@ def load_rig(name: str) -> RigDescription:
     path = RIGS_DIR / f"{name}.toml"
     if not path.exists():
         raise ConfigError(f"unknown rig {name!r} (known: {', '.join(known_rigs())})")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"{path}: {exc}".replace("\n", " ")) from None
-    return _check(raw, str(path))
+    return _check(read_toml(path, "rig description"), str(path))
 
 
 def known_rigs() -> list[str]:

@@ -5,7 +5,7 @@ import copy
 import tomllib
 from pathlib import Path
 
-from .model import ROOT, ConfigError
+from .model import ROOT, ConfigError, read_toml
 
 SCENARIOS_DIR = ROOT / "scenarios"
 
@@ -81,11 +81,9 @@ def load_scenario(name_or_path: str, overrides: list[str] = ()) -> dict:
     if not path.suffix:
         path = SCENARIOS_DIR / f"{name_or_path}.toml"
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = read_toml(path, "scenario")
     except FileNotFoundError:
         raise ConfigError(f"no scenario {name_or_path!r} (known: {', '.join(available())})") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read scenario: {exc}".replace("\n", " ")) from None
     unknown = set(raw) - set(DEFAULTS)
     if unknown:
         raise ConfigError(f"{path}: unknown scenario parameter(s) {', '.join(sorted(unknown))}")
