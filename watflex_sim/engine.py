@@ -13,7 +13,7 @@ import numpy as np
 from . import __version__
 from .effects import Patch, apply_effects, apply_parameters
 from .joint_friction import FrictionCallback, configure, nominal_frictions, patched
-from .model import ConfigError, load_model, rig_params
+from .model import ConfigError, load_model, rig_params, segmented
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
 from .rigdesc import load_rig
@@ -32,7 +32,8 @@ def make_rig(scenario: dict, model: mujoco.MjModel, data: mujoco.MjData):
     if description.sensors == "generic":
         return GenericRig(model, data, description, scenario["noise"], scenario["seed"])
     kwargs = {"locked": scenario["locked_joints"]} if description.sensors == "watflex" else {}
-    return RIG_CLASSES[description.sensors](model, data, rig_params(rig_name), scenario["noise"], scenario["seed"], **kwargs)
+    params = segmented(rig_name, scenario["n_segments"])
+    return RIG_CLASSES[description.sensors](model, data, params, scenario["noise"], scenario["seed"], **kwargs)
 
 
 class SimulationError(RuntimeError):
@@ -170,6 +171,7 @@ class ControlLoop:
             timestep=scenario["timestep"] or None,
             actuator_bench=scenario["actuator_bench"],
             edits=patch.spec_edits,
+            n_segments=scenario["n_segments"],
         )
         for edit in patch.model_edits:
             edit(self.model)

@@ -1,6 +1,7 @@
 """Load a rig's nominal model (`models/<rig>.xml`) with a scenario's payload, locks and tilt."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Callable, Sequence
@@ -38,6 +39,16 @@ def rig_params(rig: str):
     return RIGS[rig]
 
 
+def segmented(rig: str, n_segments: int):
+    """The rig's parameters with `n_segments` segments per flexible part (0: unchanged)."""
+    params = rig_params(rig)
+    if not n_segments:
+        return params
+    if not isinstance(n_segments, int) or n_segments < 2 or not hasattr(params, "n_segments"):
+        raise ConfigError(f"n_segments must be an integer >= 2 on a rig with flexible parts, got {n_segments!r}")
+    return dataclasses.replace(params, n_segments=n_segments)
+
+
 def nominal_spec(rig: str) -> mujoco.MjSpec:
     """The committed nominal model of `rig`, or the generator's if the XML is not there."""
     params = rig_params(rig)
@@ -54,6 +65,7 @@ def load_model(
     timestep: float | None = None,
     actuator_bench: str = "",
     edits: Sequence[Callable[[mujoco.MjSpec], None]] = (),
+    n_segments: int = 0,
 ) -> mujoco.MjModel:
     """Compile `rig` with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
 
@@ -62,10 +74,11 @@ def load_model(
     `actuator_bench` names a joint to test alone, as thesis section 4.5 tests the actuators:
     the flexible chain it drives (and all it carries) is removed, so the joint moves its own
     identified inertia (armature) and clamps only; the other joints are locked at 0.
-    `edits` change the spec first (effects and refit parameters, effects.Patch).
-    Raises ConfigError for a negative payload, an unknown joint or a bad timestep.
+    `edits` change the spec first (effects and refit parameters, effects.Patch). `n_segments`
+    (0: the committed model's) rebuilds the flexible parts with that many segments each.
+    Raises ConfigError for a negative payload, an unknown joint, a bad timestep or segment count.
     """
-    spec = nominal_spec(rig)
+    spec = nominal_spec(rig) if not n_segments else BUILDERS[rig](segmented(rig, n_segments))
     for edit in edits:
         edit(spec)
     if actuator_bench:

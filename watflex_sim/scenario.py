@@ -24,6 +24,7 @@ DEFAULTS = {
     "tilt_rad": 0.0,  # rad, table tilt (watflex)
     "tilt_azimuth_rad": 0.0,  # rad, downhill direction from +x
     "timestep": 0.0,  # s physics step; 0 = the model's own
+    "n_segments": 0,  # segments per flexible part; 0 = the committed model's
     "friction": "nominal",  # nominal (rigs.md joint friction) | none
     "joint_friction": {},  # joint -> JointFriction fields overriding/adding (joint_friction.py)
     "noise": True,  # measurement noise of rigs.md §3
