@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 from scipy.optimize import least_squares, minimize_scalar  # noqa: E402
 
+from watflex_sim.plot import save_figure  # noqa: E402
 from watflex_sim import metrics  # noqa: E402
 from watflex_sim.engine import ControlLoop  # noqa: E402
 from watflex_sim.params import CONTROL_PERIOD, WATFLEX, Friction  # noqa: E402
@@ -441,10 +442,7 @@ def figure_map(result: dict, path: Path) -> Path:
     for a in axes.flat:
         a.grid(alpha=0.3, which="both")
     fig.suptitle(f"shoulder bench, PI velocity scan: {result['holds']} holds, {result['duration_s']:.0f} s simulated")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def figure_presliding(result: dict, path: Path) -> Path:
@@ -471,10 +469,7 @@ def figure_presliding(result: dict, path: Path) -> Path:
     at2.set_ylabel("torque input (N m), grey")
     at.legend(fontsize=8, loc="lower left")
     at.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def figure_p_step(result: dict, path: Path) -> Path:
@@ -506,10 +501,7 @@ def figure_p_step(result: dict, path: Path) -> Path:
     af.set_title("estimated friction torque (thesis fig. 4.28)", fontsize=9)
     af.grid(alpha=0.3)
     af.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def figure_inertia(result: dict, measured: Run, path: Path) -> Path:
@@ -544,10 +536,7 @@ def figure_inertia(result: dict, measured: Run, path: Path) -> Path:
     ac.legend(fontsize=8)
     for a in (ax, ae, ac):
         a.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def figure_dwell(result: dict, path: Path) -> Path:
@@ -581,10 +570,7 @@ def figure_dwell(result: dict, path: Path) -> Path:
     aa.plot(t, (r.channels[f"{JOINT}_angle"] - r.channels[f"{JOINT}_angle"][0]) / COUNT, color="0.5", lw=1)
     aa.set_ylabel("angle (encoder counts)")
     aa.set_ylim(-1, 10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 # --- command line ------------------------------------------------------------------------------

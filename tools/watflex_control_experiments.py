@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 from controllers import PDJoint  # noqa: E402
 from controllers.passivity import compensated  # noqa: E402
+from watflex_sim.plot import save_figure  # noqa: E402
 from watflex_sim import metrics  # noqa: E402
 from watflex_sim.endpoint import EndpointEstimator  # noqa: E402
 from watflex_sim.engine import ControlLoop  # noqa: E402
@@ -387,10 +388,7 @@ def figure_observer(result: dict, path: Path) -> Path:
     at.legend(fontsize=8, loc="upper right")
     for a in (ax, aa, at):
         a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def figure_passivity(result: dict, path: Path) -> Path:
@@ -417,10 +415,7 @@ def figure_passivity(result: dict, path: Path) -> Path:
         a.grid(alpha=0.3)
         a.legend(fontsize=7, loc="best")
     fig.suptitle("passivity-based control, 3 s cubic from (1.1, 0.4) m to (0.5, 0.9) m (thesis figs. 5.2-5.3)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def figure_disturbance(result: dict, path: Path) -> Path:
@@ -444,10 +439,7 @@ def figure_disturbance(result: dict, path: Path) -> Path:
         axes[1, col].set_xlabel("time (s)")
     fig.suptitle(f"force pulse ({p.force[0]:g}, {p.force[1]:g}) N for {p.duration_s:g} s on the end effector at rest "
                  f"at (1.1, 0.4) m (thesis fig. 5.4)", fontsize=11)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def figure_two_joint(result: dict, path: Path) -> Path:
@@ -472,10 +464,7 @@ def figure_two_joint(result: dict, path: Path) -> Path:
         for x in (a, b):
             x.grid(alpha=0.3)
     fig.suptitle("two flexible links, independent joint control: observer-based (tables 5.1, 5.2) vs PD")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 # --- table ----------------------------------------------------------------------------------------

@@ -45,8 +45,13 @@ def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = N
         ax.legend(fontsize=7, loc="best", ncol=2)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(title or f"{rec.rig}: {rec.meta.get('experiment', '')}")
+    return save_figure(fig, path)
+
+
+def save_figure(fig, path, dpi: int = 110) -> Path:
+    """Lay out, write `fig` as a PNG at `path` and close it; returns the path."""
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
