@@ -389,7 +389,7 @@ EXPLAIN = {
 }
 
 
-def _finding(result: dict, model: Model, before: float, after: float, mismatch: list[dict], rig,
+def _finding(result: dict, model: Model, before: float, after: float, mismatch: list[dict],
              train_before: float = math.nan) -> dict:
     effect = next(e for e in model.effects if e["effect"] == result["effect"] and e["where"] == result["where"])
     params = {k: v for k, v in effect.items() if k not in ("effect", "where")}
@@ -457,12 +457,12 @@ def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, ma
         alternative = offset_alternative(data, current, best, train_now, held)
         if alternative is not None and alternative["score"] >= best["score"] - 1e-3:
             say("asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
-            findings.append(_finding(alternative, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, data.rig, train_now))
+            findings.append(_finding(alternative, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, train_now))
             offset = {**alternative, "effect": "actuator_offset", "where": alternative["model"].effects[-1]["where"]}
-            findings.append(_finding(offset, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, data.rig, train_now))
+            findings.append(_finding(offset, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, train_now))
             best = alternative
         else:
-            findings.append(_finding(best, best["model"], held, best["held_out"]["nrmse"], mismatch, data.rig, train_now))
+            findings.append(_finding(best, best["model"], held, best["held_out"]["nrmse"], mismatch, train_now))
         current = best["model"]
         sims = simulate_all(data, current)
         held = best["held_out"]["nrmse"]
