@@ -43,9 +43,11 @@ class Patch:
 class Param:
     """A fitted parameter: name, unit, bounds and a starting value (never at a bound).
 
-    With a `scale`, low/high/start are multiples of a size taken from the data (diagnose.py):
-    "effort" the RMS actuator force or torque, "effort/speed" that over the RMS speed,
-    "command" the RMS of the command channel `where`, "channel" the spread of channel `where`.
+    With a `scale`, low/high/start/neutral are multiples of a size taken from the data
+    (diagnose.py): "effort" the RMS actuator force or torque, "effort/speed" that over the RMS
+    speed, "command" the RMS of the command channel `where`, "channel" the spread of channel
+    `where`. `neutral` is the value at which the effect vanishes (None: no such value, e.g. a
+    stiffness, or a shape parameter such as a time constant); `log` fits it on a log scale.
     """
 
     name: str
@@ -54,6 +56,8 @@ class Param:
     high: float
     start: float
     scale: str = ""
+    neutral: float | None = None
+    log: bool = False
 
 
 # --- knobs: what a refit parameter or an effect turns, by MuJoCo element name --------------
@@ -304,25 +308,25 @@ def table_tilt(patch, where, angle):
 P = Param
 CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     # id: (apply, parameters, what `where` names)
-    "coulomb_friction": (coulomb_friction, (P("torque_positive", "N m", 0.0, 1.0, 0.1, "effort"), P("torque_negative", "N m", 0.0, 1.0, 0.1, "effort")), "joint"),
-    "stribeck_friction": (stribeck_friction, (P("breakaway_positive", "N m", 0.0, 1.0, 0.05, "effort"), P("breakaway_negative", "N m", 0.0, 1.0, 0.05, "effort"), P("v_s", "rad/s", 1e-3, 1.0, 0.03)), "joint"),
-    "viscous_friction": (viscous_friction, (P("coefficient", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed"), P("coefficient_negative", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed")), "joint"),
-    "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0)), "joint"),
-    "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5), P("time_constant", "s", 0.05, 30.0, 2.0)), "joint"),
-    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort"), P("period", "rad", 0.01, 20.0, 1.0), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0)), "joint"),
-    "backlash": (backlash, (P("width", "rad", 1e-5, 0.05, 1e-3),), "joint"),
-    "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 1e6, 1e4),), "joint"),
-    "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2),), "tip"),
-    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9),), "link"),
-    "structural_damping": (structural_damping, (P("ratio", "-", 0.1, 30.0, 2.0),), "link"),
-    "actuator_gain": (actuator_gain, (P("ratio", "-", 0.3, 2.0, 0.9),), "command"),
-    "actuator_offset": (actuator_offset, (P("offset", "command unit", -0.5, 0.5, 0.02, "command"),), "command"),
+    "coulomb_friction": (coulomb_friction, (P("torque_positive", "N m", 0.0, 1.0, 0.1, "effort", 0.0), P("torque_negative", "N m", 0.0, 1.0, 0.1, "effort", 0.0)), "joint"),
+    "stribeck_friction": (stribeck_friction, (P("breakaway_positive", "N m", 0.0, 1.0, 0.05, "effort", 0.0), P("breakaway_negative", "N m", 0.0, 1.0, 0.05, "effort", 0.0), P("v_s", "rad/s", 1e-3, 1.0, 0.03, log=True)), "joint"),
+    "viscous_friction": (viscous_friction, (P("coefficient", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0), P("coefficient_negative", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0)), "joint"),
+    "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4, log=True), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0, log=True)), "joint"),
+    "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True)), "joint"),
+    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.01, 20.0, 1.0, log=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
+    "backlash": (backlash, (P("width", "rad", 1e-5, 0.05, 1e-3, log=True),), "joint"),
+    "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 1e6, 1e4, log=True),), "joint"),
+    "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),
+    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "link"),
+    "structural_damping": (structural_damping, (P("ratio", "-", 0.1, 30.0, 2.0, neutral=1.0),), "link"),
+    "actuator_gain": (actuator_gain, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "command"),
+    "actuator_offset": (actuator_offset, (P("offset", "command unit", -0.5, 0.5, 0.02, "command", 0.0),), "command"),
     "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 3.0, 1.5, "command"),), "command"),
-    "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95),), "channel"),
-    "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel"),), "channel"),
-    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.002),), "command or channel"),
-    "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0),), "bearing geom"),
-    "table_tilt": (table_tilt, (P("angle", "rad", -0.05, 0.05, 0.001),), "rig"),
+    "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95, neutral=1.0),), "channel"),
+    "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel", 0.0),), "channel"),
+    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.004, neutral=0.0),), "command or channel"),
+    "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0, neutral=0.0),), "bearing geom"),
+    "table_tilt": (table_tilt, (P("angle", "rad", -0.05, 0.05, 0.001, neutral=0.0),), "rig"),
 }
 
 
