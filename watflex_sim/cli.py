@@ -177,9 +177,22 @@ def cmd_diagnose(args) -> int:
         own = path.with_suffix(".json")
         recordings.append(read_recording(path, sidecar=None if own.exists() or sidecar is None else sidecar))
     start = time.perf_counter()
-    say = (lambda m: print(f"[{time.perf_counter() - start:6.1f} s] {m}", file=sys.stderr, flush=True))
+    bar = ProgressBar("", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
+
+    def say(message: str) -> None:  # one line per stage; the bar below counts its simulations
+        if bar.enabled:
+            sys.stderr.write("\r\033[K")
+        print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr, flush=True)
+        bar.label, bar.start = "  simulations", time.perf_counter()
+
+    def jobs_done(done: int, total: int) -> None:
+        bar.label = f"  simulations {done}/{total}"
+        bar(done / total if done < total else 0.999)
+
     report = diagnose(recordings, [p.name for p in args.recordings], workers=max(1, args.workers),
-                      max_effects=args.max_effects, progress=say)
+                      max_effects=args.max_effects, progress=say, jobs_done=jobs_done)
+    if bar.enabled:
+        sys.stderr.write("\r\033[K")
     path = write_report(report, recordings, args.report, rrd=not args.no_rrd)
     print(summary(report))
     print(f"wrote {path} ({time.perf_counter() - start:.1f} s)")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -198,15 +198,24 @@ class Runner:
     """Simulation jobs on one diagnosis' data, in `workers` processes (MuJoCo callbacks are
     process-global: one simulation per process at a time) or here when workers <= 1."""
 
-    def __init__(self, data: Data, workers: int):
+    def __init__(self, data: Data, workers: int, jobs_done=None):
         _hold(data)
         self.data = data
+        self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.pool = ProcessPoolExecutor(workers, initializer=_hold, initargs=(data,)) if workers > 1 else None
 
     def map(self, fn, jobs: list) -> list:
+        """fn over jobs, in order; reports progress as jobs finish."""
         if self.pool is None or len(jobs) <= 1:
-            return [fn(j) for j in jobs]
-        return list(self.pool.map(fn, jobs))
+            out = []
+            for job in jobs:
+                out.append(fn(job))
+                self.jobs_done(len(out), len(jobs))
+            return out
+        futures = [self.pool.submit(fn, j) for j in jobs]
+        for done, _ in enumerate(as_completed(futures), 1):
+            self.jobs_done(done, len(jobs))
+        return [f.result() for f in futures]
 
     def simulate(self, model: Model) -> list[Recording] | None:
         """Every recording re-simulated with `model` (one job per recording); None if one diverged."""
@@ -779,14 +788,15 @@ FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one sim
 
 
 def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, max_effects: int = 2,
-             screen_top: int = SCREEN_TOP, progress=None) -> dict:
+             screen_top: int = SCREEN_TOP, progress=None, jobs_done=None) -> dict:
     """Run the whole diagnosis; return the report (recordings.md schema) plus 'sims' for plotting.
 
-    Raises ConfigError for recordings that cannot be diagnosed together.
+    `progress(message)` hears each stage, `jobs_done(done, total)` each finished simulation job
+    of a stage. Raises ConfigError for recordings that cannot be diagnosed together.
     """
     say = progress or (lambda message: None)
     data = prepare(recordings, names)
-    with Runner(data, workers) as runner:
+    with Runner(data, workers, jobs_done) as runner:
         return _diagnose(data, runner, max_effects, screen_top, say)
 
 

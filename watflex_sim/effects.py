@@ -204,8 +204,9 @@ def position_dependent_friction(patch, where, amplitude, period=2 * math.pi, pha
         ripple_amplitude=amplitude, ripple_period=period, ripple_phase=phase, spring=spring)
 
 
-EXTRA_HINGE_ARMATURE = 1e-3  # kg m^2: the clamp between the two hinges in series [ours]; keeps
-# sqrt(k_beam / armature) * dt < 1 at both rigs' steps
+EXTRA_HINGE_ARMATURE = 5e-3  # kg m^2: the clamp between the two hinges in series [ours]; keeps
+# sqrt(k / armature) * dt < 1 for k up to 2e4 N m/rad at Watflex's 0.5 ms (5e5 at the laser's 0.1 ms)
+LIMIT_SOLREF = [0.002, 1.0]  # s, damping ratio: a hard dead-band stop (MuJoCo's default 0.02 s is a soft spring)
 
 
 def _extra_hinge(spec: mujoco.MjSpec, where: str, name: str):
@@ -236,6 +237,7 @@ def backlash(patch, where, width):
         j = _extra_hinge(spec, where, "backlash")
         j.range = [-width / 2, width / 2]
         j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        j.solref_limit = LIMIT_SOLREF
         j.damping = [1e-2, 0, 0]  # N m s/rad: the slip is not free of losses [ours]
     patch.spec_edits.append(edit)
 
@@ -315,10 +317,10 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True)), "joint"),
     "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.01, 20.0, 1.0, log=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
     "backlash": (backlash, (P("width", "rad", 1e-5, 0.05, 1e-3, log=True),), "joint"),
-    "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 1e6, 1e4, log=True),), "joint"),
+    "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),
     "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),
     "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "link"),
-    "structural_damping": (structural_damping, (P("ratio", "-", 0.1, 30.0, 2.0, neutral=1.0),), "link"),
+    "structural_damping": (structural_damping, (P("ratio", "-", 0.5, 30.0, 2.0, neutral=1.0),), "link"),
     "actuator_gain": (actuator_gain, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "command"),
     "actuator_offset": (actuator_offset, (P("offset", "command unit", -0.5, 0.5, 0.02, "command", 0.0),), "command"),
     "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 3.0, 1.5, "command"),), "command"),

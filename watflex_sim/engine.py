@@ -198,7 +198,7 @@ class ControlLoop:
         columns = {c: [f(t) for t in times] for c, f in references.items()}
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
         self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
-        self._sensor_fifo = {c: [math.nan] * n for c, n in patch.sensor_delay.items() if n > 0}
+        self._sensor_fifo = {c: [None] * n for c, n in patch.sensor_delay.items() if n > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
 
@@ -224,7 +224,7 @@ class ControlLoop:
             gain, offset, limit = self.patch.actuator[channel]
             u = self.data.ctrl[actuator] / scale * gain + offset
             self.data.ctrl[actuator] = scale * max(-limit, min(limit, u))
-        recorded.update(self.rig.monitor())
+        recorded.update(self._sense(self.rig.monitor()) if self.patch.sensor else self.rig.monitor())
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
@@ -239,6 +239,8 @@ class ControlLoop:
                 obs[channel] = obs[channel] * gain + offset
         for channel, fifo in self._sensor_fifo.items():
             if channel in obs:
+                if fifo[0] is None:  # before the delay has passed, the sensor reads its first value
+                    fifo[:] = [obs[channel]] * len(fifo)
                 fifo.append(obs[channel])
                 obs[channel] = fifo.pop(0)
         return obs

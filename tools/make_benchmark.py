@@ -1,0 +1,342 @@
+"""Generate a public benchmark of concealed effects for `watflex-sim diagnose`.
+
+Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,watflex]
+           [--per-effect 1] [--clean 3] [--effects a,b] [--duration 6]
+
+A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
+rig with one catalogue effect added, in diagnosis order (the diagnosis holds out the LAST one):
+  laser_arm: 2.5 mm tip step positive, negative (0.7 kg), then a step at another paper payload;
+  watflex (shoulder locked): elbow step +0.5 rad, -0.5 rad, then the 0.1 rad staircase.
+Each effect gets a place (`where`) the rig description allows (Watflex: elbow-side places,
+the ones the elbow experiments excite) and a magnitude from RANGES: visible above the rig
+noise but modest. One concealment per case (CONCEALMENTS). `--clean` cases per rig have no
+effect, only the rig's parameters perturbed within their tolerances.
+
+Written: DIR/cases/<id>/<stem>.csv + .json (sidecars carry no effect, parameters or notes;
+case ids are opaque) and DIR/truth.json (the answers; schema in `make_cases`). DIR must not
+already hold a benchmark. Same seed, same arguments: byte-identical files.
+
+Skipped (SKIPPED, listed with the reason at the end of --help): laser_arm presliding and
+dwell_time_stiction (no nominal hub friction to act on), laser_arm structural_damping (does
+not show), backlash on both rigs (the simulator's band is a soft spring: never modest), the
+laser's motor_current sensor effects and tip_sensor delay (simulator faults); Watflex places
+the locked-shoulder experiments do not excite; effects a rig description does not allow.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import zlib
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import numpy as np  # noqa: E402
+
+from watflex_sim import SimulationError, check, load_scenario, simulate, write_recording  # noqa: E402
+from watflex_sim.effects import CATALOGUE  # noqa: E402
+from watflex_sim.rigdesc import load_rig  # noqa: E402
+
+FORMAT = "flexarm-benchmark/1"
+RIGS = ("laser_arm", "watflex")
+MAX_DRAWS = 4  # magnitude draws before a case whose simulation diverges is skipped
+SMALL = 0.2  # "small against noise": magnitudes from the weakest 20 % of the range
+
+# Magnitudes: rig -> effect (or "effect:where") -> {parameter: (kind, weak, strong)}.
+# kind "+": uniform weak..strong; "±": that with a random sign; "×": a ratio weak..strong (> 1)
+# or its inverse, at random; "~": uniform, not a magnitude; "=": fixed at `weak`.
+# Chosen by simulating each effect at both ends on the three 6 s recordings, noise-free, against
+# the nominal noise-free run: at the weak end the mean NRMSE over the compared channels is about
+# the noise floor (laser 0.07, Watflex 0.03) and the most affected channel moves by several times
+# its rig noise (rigs/*.toml); at the strong end the mean NRMSE stays below ~0.4.
+RANGES = {
+    "laser_arm": {  # motor torque RMS 0.5 N m over the 0.4 s transient, 0.2 N m over 6 s; hub 2 mrad
+        "coulomb_friction": {"torque_positive": ("+", 0.03, 0.12), "torque_negative": ("+", 0.03, 0.12)},  # N m
+        "stribeck_friction": {"breakaway_positive": ("+", 0.04, 0.15), "breakaway_negative": ("+", 0.04, 0.15),
+                              "v_s": ("~", 0.005, 0.03)},  # N m, rad/s
+        "viscous_friction": {"coefficient": ("+", 5.0, 20.0), "coefficient_negative": ("+", 5.0, 20.0)},  # N m s/rad
+        "position_dependent_friction": {"amplitude": ("±", 0.04, 0.1), "period": ("~", 0.01, 0.05),
+                                        "phase": ("~", -math.pi, math.pi), "spring": ("=", 0.0)},  # N m, rad
+        "joint_compliance": {"stiffness": ("+", 3e4, 6e3)},  # N m/rad; <= 1e5 keeps the clamp stable at 0.1 ms
+        "payload": {"mass": ("+", 0.2, 1.0)},  # kg
+        "link_stiffness_change": {"ratio": ("+", 0.65, 0.45)},  # softer (cracked/loose): stiffer hardly shows
+        "actuator_gain": {"ratio": ("×", 1.1, 1.4)},
+        "actuator_offset": {"offset": ("±", 0.008, 0.03)},  # V (RMS command 0.08 V)
+        "current_saturation": {"limit": ("+", 0.85, 0.55)},  # V (peak command 1.05 V)
+        "sensor_gain:tip_sensor": {"ratio": ("×", 1.08, 1.25)},  # tolerance 2 %
+        "sensor_gain:hub_angle": {"ratio": ("×", 1.05, 1.2)},
+        "sensor_offset:tip_sensor": {"offset": ("±", 0.12, 0.33)},  # V: the loop hides it, the hub shows it
+        "sensor_offset:hub_angle": {"offset": ("±", 4e-5, 1.5e-4)},  # rad: 2-8 encoder counts
+        "delay": {"seconds": ("+", 0.002, 0.008)},  # s
+    },
+    "watflex": {  # elbow: break-away ~5.5 N m, RMS torque 4.5 N m, peak 30 N m, RMS speed 0.23 rad/s
+        "coulomb_friction": {"torque_positive": ("+", 0.4, 1.5), "torque_negative": ("+", 0.4, 1.5)},  # N m
+        "stribeck_friction": {"breakaway_positive": ("+", 0.5, 2.0), "breakaway_negative": ("+", 0.5, 2.0),
+                              "v_s": ("~", 0.01, 0.05)},  # N m, rad/s
+        "viscous_friction": {"coefficient": ("+", 1.0, 4.0), "coefficient_negative": ("+", 1.0, 4.0)},  # nominal ~1
+        "presliding": {"sigma0": ("+", 1e4, 1e3), "sigma1": ("~", 5.0, 20.0)},  # N m/rad, N m s/rad
+        "dwell_time_stiction": {"gain": ("+", 0.3, 0.8), "time_constant": ("~", 0.3, 1.0)},  # -, s; > 0.8 sticks
+        "position_dependent_friction": {"amplitude": ("±", 0.5, 2.0), "period": ("~", 0.3, 1.5),
+                                        "phase": ("~", -math.pi, math.pi), "spring": ("=", 0.0)},  # N m, rad
+        "joint_compliance": {"stiffness": ("+", 3e3, 6e2)},  # N m/rad; link 2 root hinge 630; > 4e3 unstable
+        "payload": {"mass": ("+", 0.15, 1.0)},  # kg on the 8.1 kg end effector
+        "link_stiffness_change": {"ratio": ("×", 1.25, 1.6)},  # tolerance 5 %
+        "structural_damping": {"ratio": ("+", 5.0, 20.0)},  # less damping than nominal hardly shows
+        "actuator_gain": {"ratio": ("×", 1.1, 1.35)},
+        "actuator_offset": {"offset": ("±", 0.4, 1.5)},  # N m
+        "current_saturation": {"limit": ("+", 22.0, 12.0)},  # N m (peak command 30 N m)
+        "sensor_gain:elbow_angle": {"ratio": ("×", 1.05, 1.2)},
+        "sensor_gain": {"ratio": ("×", 1.1, 1.3)},  # strain bridges
+        "sensor_offset:elbow_angle": {"offset": ("±", 5e-3, 2e-2)},  # rad
+        "sensor_offset": {"offset": ("±", 0.04, 0.2)},  # V on strain bridges of ~1 V spread (noise 2.7 mV)
+        "delay": {"seconds": ("+", 0.005, 0.02)},  # s
+        "bearing_friction": {"force": ("+", 0.1, 0.8)},  # N at the end effector, 0.7 m from the elbow
+        "table_tilt": {"angle": ("±", 5e-3, 2e-2)},  # rad
+    },
+}
+# Watflex places the elbow experiments excite (the shoulder is locked); laser arm: all allowed.
+EXCITED = {"watflex": {"elbow", "link2", "tip", "elbow_torque_cmd", "elbow_angle", "strain_2A", "strain_2B",
+                       "command", "end_effector_bearing", "table"}}
+SKIPPED = {  # (rig, effect) or (rig, effect, where): why no case is made
+    ("laser_arm", "presliding"): "the hub has no nominal friction for LuGre bristles to act on: no change",
+    ("laser_arm", "dwell_time_stiction"): "the hub has no nominal friction for dwell time to raise: no change",
+    ("laser_arm", "structural_damping"): "30x beam damping changes the tip NRMSE by 0.008 (noise 0.015); "
+                                         "below 0.5x the beam diverges at the 0.1 ms step",
+    ("laser_arm", "backlash"): "the band's joint limit is MuJoCo-soft on a 1e-3 kg m^2 clamp: any width "
+                               "(even 1e-5 rad) makes the loop chatter, NRMSE > 10",
+    ("watflex", "backlash"): "the band's joint limit is MuJoCo-soft on a 1e-3 kg m^2 clamp: link 2 swings "
+                             "0.1 rad on a 1e-4 rad band, NRMSE ~0.7 for any width",
+    ("laser_arm", "sensor_gain", "motor_current"): "sensor effects never reach motor_current (engine applies "
+                                                   "them to the observed channels only)",
+    ("laser_arm", "sensor_offset", "motor_current"): "sensor effects never reach motor_current",
+    ("laser_arm", "delay", "tip_sensor"): "a sensor delay feeds NaN to the controller at the start: diverges",
+}
+DIRECTIONAL = {"coulomb_friction": ("torque_positive", "torque_negative"),
+               "stribeck_friction": ("breakaway_positive", "breakaway_negative"),
+               "viscous_friction": ("coefficient", "coefficient_negative")}
+CONCEALMENTS = ("closed loop", "one direction only", "mixed with parameter error", "small against noise",
+                "indirect channel")
+NEUTRAL_NOTES = "benchmark recording"
+DROPPED_SCENARIO_KEYS = ("effects", "parameters", "notes", "name")  # the truth never goes in a sidecar
+
+
+def _rng(seed: int, key: str) -> np.random.Generator:
+    """A generator per case, so a case does not depend on which other cases are made."""
+    return np.random.default_rng([seed, zlib.crc32(key.encode())])
+
+
+def draw(ranges: dict, rng: np.random.Generator, small: bool) -> dict[str, float]:
+    """Parameter values from a RANGES entry; `small`: magnitudes from the weakest SMALL of the range."""
+    out = {}
+    for name, (kind, *span) in ranges.items():
+        if kind == "=":
+            out[name] = float(span[0])
+            continue
+        lo, hi = span
+        u = rng.uniform(0.0, SMALL if small and kind != "~" else 1.0)
+        value = lo + u * (hi - lo)
+        if kind == "±" and rng.random() < 0.5:
+            value = -value
+        if kind == "×" and rng.random() < 0.5:
+            value = 1.0 / value
+        out[name] = float(f"{value:.4g}")
+    return out
+
+
+def perturbed_parameters(rig: str, rng: np.random.Generator) -> dict[str, float]:
+    """Every rig parameter's ratio drawn uniformly within its tolerance (rigs/<rig>.toml)."""
+    return {name: float(f"{1.0 + rng.uniform(-p['tolerance'], p['tolerance']):.4g}")
+            for name, p in load_rig(rig).parameters.items()}
+
+
+def experiments(rig: str, duration: float, rng: np.random.Generator) -> list[tuple[str, dict]]:
+    """The three recordings of a case as (stem, scenario without effects), the held-out one last."""
+    if rig == "laser_arm":
+        third = float(rng.choice([0.0, 1.15]))  # kg: a paper payload besides the 0.7 kg of the steps
+        plan = [("step_positive", "positive", 0.7), ("step_negative", "negative", 0.7),
+                (f"step_payload_{third:g}kg", str(rng.choice(["positive", "negative"])), third)]
+        runs = [(stem, load_scenario("laser_arm_step") | {"direction": d, "payload_kg": m}) for stem, d, m in plan]
+    else:
+        runs = []
+        for stem, direction in (("step_positive", "positive"), ("step_negative", "negative")):
+            sc = load_scenario("watflex_elbow_step") | {"direction": direction}
+            sc["reference"][0]["time_s"] = min(0.5, duration / 5)  # s
+            runs.append((stem, sc))
+        sc = load_scenario("watflex_elbow_staircase")  # 0.1 rad steps: near the elbow's break-away
+        sc["direction"] = str(rng.choice(["positive", "negative"]))
+        sc["reference"][0]["times_s"] = [round(duration * f, 3) for f in (0.2, 0.4, 0.6, 0.8)]  # s
+        runs.append(("staircase", sc))
+    for _, sc in runs:
+        sc.update(duration_s=float(duration), noise=True, seed=int(rng.integers(2**31)))
+    return runs
+
+
+def places(rig: str, effect: str) -> list[str]:
+    """Where `effect` may go on `rig`: allowed by the rig description, excited, not SKIPPED."""
+    allowed = load_rig(rig).effects.get(effect, [])
+    excited = EXCITED.get(rig)
+    return [w for w in allowed if (excited is None or w in excited) and (rig, effect, w) not in SKIPPED]
+
+
+def why_skipped(rig: str, effect: str) -> str | None:
+    """Why `effect` gets no case on `rig`, or None if it gets cases."""
+    if (rig, effect) in SKIPPED:
+        return SKIPPED[(rig, effect)]
+    if effect not in load_rig(rig).effects:
+        return "the rig description does not allow it"
+    if not places(rig, effect):
+        return "no place the experiments excite"
+    return None
+
+
+def _ranges(rig: str, effect: str, where: str) -> dict:
+    return RANGES[rig].get(f"{effect}:{where}") or RANGES[rig][effect]
+
+
+def _units(rig: str, effect: str, where: str) -> dict[str, str]:
+    """Parameter units, 'command unit'/'channel unit' resolved to the channel's unit."""
+    channel_unit = load_rig(rig).channels.get(where, {}).get("unit", "")
+    return {p.name: channel_unit if p.unit.endswith(" unit") else p.unit for p in CATALOGUE[effect][1]
+            if p.name in _ranges(rig, effect, where)}
+
+
+def _sidecar_meta(meta: dict) -> dict:
+    """The sidecar of a benchmark recording: what a user would write, without the truth."""
+    meta = dict(meta, notes=NEUTRAL_NOTES)
+    meta["scenario"] = {k: v for k, v in meta["scenario"].items() if k not in DROPPED_SCENARIO_KEYS}
+    return meta
+
+
+def simulate_case(runs: list, effects: list, parameters: dict, drop: tuple = ()) -> list:
+    """[(stem, Recording)] of a case's runs with `effects` and refit `parameters`, without `drop` channels."""
+    out = []
+    for stem, scenario in runs:
+        rec = simulate(check(dict(scenario, effects=effects, parameters=parameters))).recording
+        rec.channels = {c: v for c, v in rec.channels.items() if c not in drop}
+        rec.meta = _sidecar_meta(rec.meta)
+        out.append((stem, rec))
+    return out
+
+
+def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float) -> tuple[dict, list] | None:
+    """One case: (truth entry without recordings, [(stem, Recording)]), or None if it always diverged.
+
+    `effect` None: a clean case (rig parameters perturbed within tolerance only)."""
+    key = f"{rig}/{effect or 'clean'}/{k}"
+    rng = _rng(seed, key)
+    truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, effect=effect, where=None,
+                 parameters={}, units={}, refit_parameters={}, concealment=None, duration_s=float(duration))
+    runs = experiments(rig, duration, rng)
+    if effect is None:
+        truth["refit_parameters"] = perturbed_parameters(rig, rng)
+        return truth, simulate_case(runs, [], truth["refit_parameters"])
+    where = str(rng.choice(places(rig, effect)))
+    options = [c for c in CONCEALMENTS if c != "one direction only"
+               and (c != "indirect channel" or (rig == "watflex" and where != "elbow_angle"))]
+    one_side = effect in DIRECTIONAL and rng.random() < 0.5  # else 3 effects of ~35 would rarely get it
+    concealment = "one direction only" if one_side else str(rng.choice(options))
+    drop = ("elbow_angle",) if concealment == "indirect channel" else ()
+    for _ in range(MAX_DRAWS):
+        parameters = draw(_ranges(rig, effect, where), rng, small=concealment == "small against noise")
+        if one_side:
+            parameters[DIRECTIONAL[effect][int(rng.integers(2))]] = 0.0
+        refit = perturbed_parameters(rig, rng) if concealment == "mixed with parameter error" else {}
+        try:
+            recordings = simulate_case(runs, [dict(effect=effect, where=where, **parameters)], refit, drop)
+        except SimulationError as exc:
+            print(f"  {key}: diverged with {parameters} ({exc}); drawing again", file=sys.stderr)
+            continue
+        truth.update(where=where, parameters=parameters, units=_units(rig, effect, where),
+                     refit_parameters=refit, concealment=concealment)
+        return truth, recordings
+    print(f"  {key}: skipped, diverged {MAX_DRAWS} times", file=sys.stderr)
+    return None
+
+
+def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
+               duration: float = 6.0, log=lambda line: print(line, flush=True)) -> dict:
+    """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
+
+    truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "recordings" (paths relative
+    to `out`, diagnosis order: the last is held out), "effect" | null, "where" | null, "parameters",
+    "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s"}],
+    "skipped": [{"rig", "effect", "why"}]}. `effects` None: the whole catalogue.
+    """
+    out = Path(out)
+    if (out / "truth.json").exists() or (out / "cases").exists():
+        raise ValueError(f"{out} already holds a benchmark (truth.json or cases/): choose another directory")
+    effects = list(CATALOGUE) if effects is None else list(effects)
+    plan, skipped = [], []
+    for rig in rigs:
+        for effect in effects:
+            why = why_skipped(rig, effect)
+            if why:
+                skipped.append({"rig": rig, "effect": effect, "why": why})
+            else:
+                plan += [(rig, effect, k) for k in range(per_effect)]
+        plan += [(rig, None, k) for k in range(clean)]
+    cases = []
+    for n, (rig, effect, k) in enumerate(plan, 1):
+        start = time.perf_counter()
+        made = make_case(rig, effect, k, seed, duration)
+        if made is None:
+            skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
+            continue
+        truth, recordings = made
+        directory = out / "cases" / truth["id"]
+        paths = [write_recording(rec, directory, stem) for stem, rec in recordings]
+        truth["recordings"] = [p.relative_to(out).as_posix() for p in paths]
+        cases.append(truth)
+        log(f"[{n}/{len(plan)}] {truth['id']}: {effect or 'clean'}"
+            f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
+            f"{time.perf_counter() - start:.1f} s")
+    order = ("id", "rig", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
+             "concealment", "duration_s")
+    truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
+             "cases": [{k: c[k] for k in order} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped}
+    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return truth
+
+
+def main(argv=None) -> int:
+    first, _, rest = __doc__.partition("\n\n")
+    skipped = "\n".join(f"  {'/'.join(k)}: {why}" for k, why in SKIPPED.items())
+    parser = argparse.ArgumentParser(description=first, epilog=rest.split("\n\n", 1)[1] + "\nskipped:\n" + skipped,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.error = lambda message: (print(f"make_benchmark: {message}", file=sys.stderr), sys.exit(2))
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory (must not hold a benchmark yet)")
+    parser.add_argument("--seed", type=int, default=0, metavar="N", help="seed of every draw (default 0)")
+    parser.add_argument("--rigs", default=",".join(RIGS), metavar="LIST", help=f"comma-separated rigs (default {','.join(RIGS)})")
+    parser.add_argument("--per-effect", type=int, default=1, metavar="N", help="cases per effect and rig (default 1)")
+    parser.add_argument("--clean", type=int, default=3, metavar="N", help="clean cases per rig: no effect (default 3)")
+    parser.add_argument("--effects", default="", metavar="LIST", help="comma-separated catalogue effects (default: all)")
+    parser.add_argument("--duration", type=float, default=6.0, metavar="S", help="length of each recording, s (default 6)")
+    args = parser.parse_args(argv)
+    rigs = [r for r in args.rigs.split(",") if r]
+    effects = [e for e in args.effects.split(",") if e] or None
+    if not rigs or set(rigs) - set(RIGS):
+        parser.error(f"--rigs must name rigs among {', '.join(RIGS)}, got {args.rigs!r}")
+    if effects and set(effects) - set(CATALOGUE):
+        parser.error(f"unknown effect(s) {', '.join(sorted(set(effects) - set(CATALOGUE)))} "
+                     f"(catalogue: {', '.join(CATALOGUE)})")
+    if args.per_effect < 0 or args.clean < 0:
+        parser.error("--per-effect and --clean must be >= 0")
+    if not 0.2 <= args.duration <= 600:
+        parser.error(f"--duration must be within 0.2 .. 600 s (the laser step is at 0.1 s), got {args.duration:g}")
+    start = time.perf_counter()
+    try:
+        truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration)
+    except (ValueError, OSError) as exc:
+        parser.error(str(exc))
+    for s in truth["skipped"]:
+        print(f"skipped {s['rig']}/{s['effect']}: {s['why']}")
+    print(f"{len(truth['cases'])} cases in {args.out} ({time.perf_counter() - start:.0f} s); truth in "
+          f"{args.out / 'truth.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

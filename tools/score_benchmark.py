@@ -1,0 +1,177 @@
+"""Score the diagnosis on a benchmark made by tools/make_benchmark.py, beside two baselines.
+
+    python tools/score_benchmark.py BENCH_DIR [--cases PATTERN] [--no-baselines] [--workers 2]
+
+For every case it runs `watflex_sim.diagnose.diagnose` on the case's recordings only (the truth
+in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-only and
+(b) SINDy on the residual (tools/baselines.py). It prints and writes BENCH_DIR/score.md:
+
+- per case: truth, what each method names first, parameter error, held-out NRMSE, time;
+- a confusion table (true effect -> effect named first, ours);
+- the summary: top-1 effect accuracy, location accuracy, "none" specificity, median parameter
+  error, median held-out NRMSE ratio after/before, time per case.
+
+Parameter error of a finding that names the right effect: for each true parameter,
+|found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
+for a parameter whose true value is neutral, e.g. the zero side of a one-direction friction,
+relative to the largest true deviation of the effect); the case's error is the mean over them.
+Results are also written to BENCH_DIR/score.json.
+"""
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import statistics
+import sys
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from watflex_sim.diagnose import diagnose  # noqa: E402
+from watflex_sim.effects import CATALOGUE  # noqa: E402
+from watflex_sim.model import ConfigError  # noqa: E402
+from watflex_sim.recording import read_recording  # noqa: E402
+
+NONE = "none"
+
+
+def parameter_error(effect: str, truth: dict, found: dict) -> float | None:
+    """Mean relative error of the found parameters against the true ones (see module doc)."""
+    neutral = {p.name: (p.neutral or 0.0) for p in CATALOGUE[effect][1]}
+    deviations = {k: abs(v - neutral.get(k, 0.0)) for k, v in truth.items() if k in found}
+    if not deviations:
+        return None
+    largest = max(deviations.values()) or 1.0
+    return statistics.mean(abs(found[k] - truth[k]) / (deviations[k] or largest) for k in deviations)
+
+
+def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
+    """Diagnose one case (and the baselines); compare with its truth."""
+    paths = [root / p for p in case["recordings"]]
+    recordings = [read_recording(p) for p in paths]
+    names = [p.name for p in paths]
+    start = time.perf_counter()
+    report = diagnose(recordings, names, workers=workers)
+    seconds = time.perf_counter() - start
+    first = report["findings"][0] if report["findings"] else None
+    truth_effect = case["effect"] or NONE
+    row = {
+        "id": case["id"], "rig": case["rig"], "truth": truth_effect, "where": case.get("where"),
+        "concealment": case.get("concealment", ""),
+        "ours": first["effect"] if first else NONE, "ours_where": first["where"] if first else None,
+        "ours_all": [f["effect"] for f in report["findings"]],
+        "held_before": report["held_out"]["before"]["nrmse"], "held_after": report["held_out"]["after"]["nrmse"],
+        "seconds": seconds, "error": None,
+    }
+    if first and truth_effect != NONE:  # the true effect anywhere among the findings counts for the error
+        match = next((f for f in report["findings"] if f["effect"] == truth_effect), None)
+        if match:
+            row["error"] = parameter_error(truth_effect, case["parameters"], match["parameters"])
+    if baselines:
+        from baselines import refit_only, sindy_residual
+
+        refit = refit_only(recordings, names)
+        row["refit_held_after"] = refit["held_out"]["after"]
+        try:
+            sindy = sindy_residual(recordings, names, parameters=refit["refit_parameters"])
+            row["sindy"] = sindy["effect"] or NONE
+            row["sindy_held_after"] = sindy["held_out"]["after"]
+        except ImportError as exc:
+            row["sindy"], row["sindy_held_after"] = f"unavailable ({exc})", float("nan")
+    return row
+
+
+def _pct(hits: int, total: int) -> str:
+    return f"{100 * hits / total:.0f} % ({hits}/{total})" if total else "-"
+
+
+def summary(rows: list[dict], baselines: bool) -> str:
+    """The markdown tables: per case, confusion, and the summary figures."""
+    lines = ["| case | concealment | truth | ours | " + ("refit-only | SINDy | " if baselines else "")
+             + "param. error | held-out NRMSE before -> ours" + (" / refit / SINDy" if baselines else "") + " | time (s) |",
+             "|---|---|---|---|" + ("---|---|" if baselines else "") + "---|---|---|"]
+    for r in rows:
+        err = "-" if r["error"] is None else f"{100 * r['error']:.0f} %"
+        ours = r["ours"] + (f" @ {r['ours_where']}" if r["ours_where"] else "")
+        base = f"none | {r['sindy']} | " if baselines else ""
+        held = f"{r['held_before']:.3f} -> {r['held_after']:.3f}"
+        if baselines:
+            held += f" / {r['refit_held_after']:.3f} / {r['sindy_held_after']:.3f}"
+        truth = r["truth"] + (f" @ {r['where']}" if r["where"] else "")
+        lines.append(f"| {r['id']} | {r['concealment']} | {truth} | {ours} | {base}{err} | {held} | {r['seconds']:.0f} |")
+    confusion = defaultdict(Counter)
+    for r in rows:
+        confusion[r["truth"]][r["ours"]] += 1
+    lines += ["", "| true effect | named first by the diagnosis (count) |", "|---|---|"]
+    for truth in sorted(confusion):
+        lines.append(f"| {truth} | " + ", ".join(f"{k} {v}" for k, v in confusion[truth].most_common()) + " |")
+    effect_rows = [r for r in rows if r["truth"] != NONE]
+    clean = [r for r in rows if r["truth"] == NONE]
+    errors = [r["error"] for r in effect_rows if r["error"] is not None]
+    ratios = [r["held_after"] / r["held_before"] for r in rows if r["held_before"] > 0]
+    times = [r["seconds"] for r in rows]
+    figures = [
+        ("top-1 effect accuracy (target >= 90 %)", _pct(sum(r["ours"] == r["truth"] for r in effect_rows), len(effect_rows))),
+        ("location accuracy (first finding at the true place)", _pct(sum(r["ours_where"] == r["where"] for r in effect_rows), len(effect_rows))),
+        ('"none" specificity on clean cases (target >= 90 %)', _pct(sum(r["ours"] == NONE for r in clean), len(clean))),
+        ("median parameter error, right effect (target <= 15 %)", f"{100 * statistics.median(errors):.1f} % (n={len(errors)})" if errors else "-"),
+        ("median held-out NRMSE after / before", f"{statistics.median(ratios):.3f}" if ratios else "-"),
+        ("time per case: median / max (s)", f"{statistics.median(times):.0f} / {max(times):.0f}" if times else "-"),
+    ]
+    if baselines:
+        figures += [
+            ("SINDy baseline: top-1 effect accuracy", _pct(sum(r["sindy"] == r["truth"] for r in effect_rows), len(effect_rows))),
+            ('SINDy baseline: "none" specificity', _pct(sum(r["sindy"] == NONE for r in clean), len(clean))),
+            ("refit-only baseline: top-1 effect accuracy", _pct(0, len(effect_rows)) + " (it cannot name physics)"),
+            ("median held-out NRMSE after / before: refit-only, SINDy",
+             f"{statistics.median(r['refit_held_after'] / r['held_before'] for r in rows):.3f}, "
+             f"{statistics.median(r['sindy_held_after'] / r['held_before'] for r in rows):.3f}"),
+        ]
+    lines += ["", "| figure | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in figures]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    parser.add_argument("bench", type=Path, help="directory written by tools/make_benchmark.py (holds truth.json)")
+    parser.add_argument("--cases", default="*", help="only case ids matching this glob, e.g. 'laser_arm-*'")
+    parser.add_argument("--no-baselines", action="store_true", help="skip refit-only and SINDy")
+    parser.add_argument("--workers", type=int, default=2, help="processes per diagnosis (default 2)")
+    args = parser.parse_args(argv)
+    truth_path = args.bench / "truth.json"
+    try:
+        truth = json.loads(truth_path.read_text())
+        cases = [c for c in truth["cases"] if fnmatch.fnmatch(c["id"], args.cases)]
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"error: cannot read {truth_path}: {exc}", file=sys.stderr)
+        return 2
+    if not cases:
+        print(f"error: no case matches {args.cases!r} in {truth_path}", file=sys.stderr)
+        return 2
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    rows = []
+    start = time.perf_counter()
+    for i, case in enumerate(cases, 1):
+        try:
+            row = score_case(args.bench, case, args.workers, not args.no_baselines)
+        except ConfigError as exc:
+            print(f"error: case {case['id']}: {exc}", file=sys.stderr)
+            return 2
+        rows.append(row)
+        elapsed = time.perf_counter() - start
+        print(f"[{i}/{len(cases)}] {case['id']}: truth {row['truth']}, ours {row['ours']}"
+              + (f", SINDy {row['sindy']}" if "sindy" in row else "")
+              + f" ({row['seconds']:.0f} s; ETA {elapsed / i * (len(cases) - i) / 60:.1f} min)", file=sys.stderr, flush=True)
+    table = summary(rows, not args.no_baselines)
+    print(table)
+    (args.bench / "score.md").write_text(table + "\n")
+    (args.bench / "score.json").write_text(json.dumps(rows, indent=1, default=float) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
