@@ -394,10 +394,11 @@ def _peak(x: np.ndarray) -> float:
 def scale_of(data: Data, param, where: str) -> float:
     """The size a scaled catalogue parameter is measured in (effects.Param.scale), from the data:
     "effort" the peak actuator force or torque, "effort/speed" that over the peak speed,
-    "command" the peak of command channel `where`, "channel" the spread of channel `where`."""
+    "command" the peak of command channel `where`, "channel" the spread of channel `where`,
+    "motion" the range of the motion channel."""
     if not param.scale:
         return 1.0
-    efforts, speeds, values = [], [], []
+    efforts, speeds, values, ranges = [], [], [], []
     for rec in data.recordings:
         for c in data.rig.of_kind("command"):
             if c in rec.channels:
@@ -405,9 +406,12 @@ def scale_of(data: Data, param, where: str) -> float:
         motion = _motion_channel(rec, data.rig)
         if motion:
             speeds.append(_peak(np.gradient(rec.channels[motion], rec.time)))
+            ranges.append(float(np.nanmax(rec.channels[motion]) - np.nanmin(rec.channels[motion])))
         if where in rec.channels:
             values.append(_peak(rec.channels[where]) if param.scale == "command" else float(np.nanstd(rec.channels[where])))
     effort = max(efforts, default=1.0) or 1.0
+    if param.scale == "motion":
+        return max(ranges, default=1.0) or 1.0
     if param.scale == "effort":
         return effort
     if param.scale == "effort/speed":
@@ -415,6 +419,7 @@ def scale_of(data: Data, param, where: str) -> float:
     return max(values, default=1.0) or 1.0
 
 
+SWITCH_LEVELS = (1.0, 0.1, 0.01)  # x start of a switch candidate's log-scaled size (width, stiffness, ...)
 LARGE_PROBE = 4.0  # x start: friction-like levels are probed small and large, since a small
 # dry friction can move a closed loop the other way from a large one (stick-slip is not linear)
 
@@ -442,8 +447,10 @@ class Candidate:
     def probes(self) -> dict[tuple[float, str], dict[str, float]]:
         """Parameter sets to simulate: (level, parameter) -> values, one per neutral parameter
         and level, or (1, "switch") with every parameter at its start."""
-        if not self.neutral:
-            return {(1.0, "switch"): dict(self.start)}
+        if not self.neutral:  # a log-scaled size is probed over two decades below its start
+            first = next(iter(self.start))
+            levels = SWITCH_LEVELS if self.slots[first].log else (1.0,)
+            return {(level, "switch"): {**self.start, first: self.start[first] * level} for level in levels}
         at_zero = {**self.start, **self.neutral}
         return {(level, name): {**at_zero, name: self.probe(name, level)} for level in self.levels for name in self.neutral}
 
@@ -563,7 +570,7 @@ def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at
     cost_rig = solve(rig_columns, lo, hi)[0] if free else cost0
     for cand in cands:
         cand.gain, cand.estimate = -math.inf, dict(cand.start)
-        for columns in cand.signature.values():
+        for level, columns in cand.signature.items():
             names = list(columns)
             cols = np.column_stack([rig_columns] + [columns[n][:, None] for n in names])
             low = [cand.slots[n].low - cand.neutral[n] if n != "switch" else 0.0 for n in names]
@@ -572,12 +579,25 @@ def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at
             if (cost_rig - cost) / cost0 <= cand.gain:
                 continue
             cand.gain = (cost_rig - cost) / cost0
-            cand.estimate = dict(cand.start)
+            cand.estimate = dict(cand.probes()[(level, "switch")]) if "switch" in columns else dict(cand.start)
             for n, a in zip(names, x[len(free):]):
                 if n != "switch":
                     slot = cand.slots[n]
                     value = float(np.clip(cand.neutral[n] + a, slot.low, slot.high))
                     cand.estimate[n] = value if value > 0 or not slot.log else cand.start[n]
+
+
+def effect_slots_of(data: Data, model: Model) -> list[Slot]:
+    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
+    value clamped inside them."""
+    slots = []
+    for i, effect in enumerate(model.effects):
+        for p in CATALOGUE[effect["effect"]][1]:
+            if p.name in effect:
+                size = scale_of(data, p, effect["where"])
+                low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
+                slots.append(Slot(("effect", i, p.name), low, high, p.log))
+    return slots
 
 
 def fit_candidate(args) -> dict:
@@ -589,8 +609,9 @@ def fit_candidate(args) -> dict:
     trial = cand.model(base, cand.estimate)
     index = len(trial.effects) - 1
     effect_slots = [Slot(("effect", index, n), s.low, s.high, s.log) for n, s in cand.slots.items()]
-    free = effect_slots + rig_slots(data)
-    x0 = [cand.estimate[n] for n in cand.slots] + [_value(base, s) for s in rig_slots(data)]
+    earlier = effect_slots_of(data, base)  # the effects found before are refit with it
+    free = effect_slots + earlier + rig_slots(data)
+    x0 = [cand.estimate[n] for n in cand.slots] + [_value(base, s) for s in earlier + rig_slots(data)]
     evaluate = evaluator(None)
     try:
         lo = np.array([s.to_internal(s.low) for s in free])
@@ -598,7 +619,7 @@ def fit_candidate(args) -> dict:
         r = evaluate([_unpack([s.to_value(x) for s, x in zip(free, u0)], free, trial)])[0]
         if r is None:
             return {"effect": cand.effect, "where": cand.where, "error": "diverges at its starting values"}
-        known = {len(effect_slots) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
+        known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
         J = jacobian(evaluate, trial, free, u0, r, known)
         model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r,
                                    noise_cost(data))
@@ -722,7 +743,7 @@ EXPLAIN = {
     "presliding": "elastic pre-sliding at {where} (bristle stiffness {sigma0:.3g}, damping {sigma1:.3g})",
     "dwell_time_stiction": "break-away at {where} grows with time at rest (gain {gain:.3g}, time constant {time_constant:.3g} s)",
     "position_dependent_friction": "a torque at {where} that varies with angle (amplitude {amplitude:.3g}, period {period:.3g}, spring {spring:.3g})",
-    "backlash": "a dead band of {width:.3g} between {where} and its link",
+    "backlash": "a dead band of {width:.3g} rad between {where} and its link, the link starting at {position:+.2f} of its half-width (a band that opens one way only reads as slip in that direction)",
     "joint_compliance": "a torsional spring of {stiffness:.4g} between {where} and its link",
     "payload": "a tip mass {mass:+.3g} kg different from the declared payload",
     "link_stiffness_change": "bending stiffness of {where} at {ratio:.3g} x the datasheet",
@@ -738,6 +759,10 @@ EXPLAIN = {
 }
 
 
+def _explain(effect: str, where: str, params: dict) -> str:
+    return EXPLAIN[effect].format(where=where, **{**{p.name: p.start for p in CATALOGUE[effect][1]}, **params})
+
+
 def _finding(result: dict, model: Model, before: float, after: float, mismatch: list[dict],
              train_before: float = math.nan) -> dict:
     effect = next(e for e in model.effects if e["effect"] == result["effect"] and e["where"] == result["where"])
@@ -747,13 +772,15 @@ def _finding(result: dict, model: Model, before: float, after: float, mismatch: 
     if "torque_positive" in params or "breakaway_positive" in params or "coefficient_negative" in params:
         a, b = list(params.values())[:2]
         direction = "both" if abs(a - b) <= 0.1 * max(abs(a), abs(b), 1e-12) else ("positive" if abs(a) > abs(b) else "negative")
+    if "position" in params and abs(params["position"]) > 0.5:  # a band that opens one way only
+        direction = "positive" if params["position"] > 0 else "negative"
     hot = [w for w in mismatch][:3]
     evidence = "; ".join(f"{w['channel']} off by {w['score']:.2f} of its spread in {w['recording']} "
                          f"{w['t_start']:.2f}-{w['t_end']:.2f} s ({w['regime']})" for w in hot)
     return {
         "effect": result["effect"], "where": result["where"], "direction": direction,
         "parameters": params, "units": {k: units.get(k, "") for k in params},
-        "explanation": EXPLAIN[result["effect"]].format(where=result["where"], **{**{p.name: p.start for p in CATALOGUE[result["effect"]][1]}, **params}),
+        "explanation": _explain(result["effect"], result["where"], params),
         "evidence": (f"residual: {evidence}. " if evidence else "") +
                     f"With this effect fitted: training NRMSE {train_before:.4f} -> {result['train']['nrmse']:.4f}, "
                     f"held-out {before:.4f} -> {after:.4f}.",
@@ -817,12 +844,11 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     sims = runner.simulate(current)
     if sims is None:
         current, sims = nominal, sims_nominal
-    steps = [{"model": "nominal", **_scores(data, sims_nominal)}, {"model": "parameters refit", **_scores(data, sims)}]
+    steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     mismatch = locate(data, sims)
     noise, noise_train, noise_held = noise_nrmse(data), noise_nrmse(data, "train"), noise_nrmse(data, "held_out")
     held = fit_scores(data, sims, "held_out")["nrmse"]
     findings, rejected, screened_report = [], [], []
-    pool: list[Candidate] = []
     for round_ in range(max_effects):
         train_now = fit_scores(data, sims, "train")["nrmse"]
         if held <= NOISE_MARGIN * noise_held or train_now <= NOISE_MARGIN * noise_train:
@@ -831,11 +857,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         r0 = residual_vector(data, sims)
         pairs = _prune(data, candidates(data.rig, current.effects))
-        if not pool:  # signatures are taken once, around the refit nominal model
-            pool = [make_candidate(data, e, w) for e, w in pairs]
-            say(f"taking the signatures of {len(pool)} candidate effects ({sum(len(c.probes()) for c in pool)} probe simulations)")
-            signatures(data, runner, current, sims, r0, pool)
-        live = [c for c in pool if (c.effect, c.where) in set(pairs)]
+        # signatures are taken around the current model: an effect can look different once
+        # another is in (a slip shows only where stiction lets the joint move)
+        live = [make_candidate(data, e, w) for e, w in pairs]
+        say(f"round {round_ + 1}: taking the signatures of {len(live)} candidate effects "
+            f"({sum(len(c.probes()) for c in live)} probe simulations)")
+        signatures(data, runner, current, sims, r0, live)
         at = np.array([_value(current, s) for s in free])
         screen(live, rig_columns, free, at, r0)
         live.sort(key=lambda c: -c.gain)
@@ -874,8 +901,13 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         say(f"round {round_ + 1}: found {best['effect']} at {best['where']}: held-out NRMSE {held:.4f} -> {best['held_out']['nrmse']:.4f}")
         current, sims = best["model"], best["sims"]
         held = best["held_out"]["nrmse"]
-        steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims)})
+        steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
+    for f in findings:  # the parameters as refit together in the final model
+        final = next((e for e in current.effects if e["effect"] == f["effect"] and e["where"] == f["where"]), None)
+        if final is not None:
+            f["parameters"] = {k: v for k, v in final.items() if k not in ("effect", "where")}
+            f["explanation"] = _explain(f["effect"], f["where"], f["parameters"])
     before_mismatch = locate(data, sims_nominal)
     return {
         "format": "flexarm-diagnosis/1",
@@ -919,6 +951,8 @@ def polish(data: Data, runner: Runner, result: dict, held: float) -> dict:
     return out
 
 
-def _scores(data: Data, sims: list[Recording]) -> dict:
-    """Training and held-out NRMSE of one stage (the report's 'steps')."""
-    return {"train_nrmse": fit_scores(data, sims, "train")["nrmse"], "held_out_nrmse": fit_scores(data, sims, "held_out")["nrmse"]}
+def _scores(data: Data, sims: list[Recording], model: Model) -> dict:
+    """One stage of the report's 'steps': training and held-out NRMSE, and the model (effects and
+    parameter ratios) to re-simulate it."""
+    return {"train_nrmse": fit_scores(data, sims, "train")["nrmse"], "held_out_nrmse": fit_scores(data, sims, "held_out")["nrmse"],
+            "effects": [dict(e) for e in model.effects], "parameters": dict(model.parameters)}

@@ -45,8 +45,8 @@ class Param:
 
     With a `scale`, low/high/start/neutral are multiples of a size taken from the data
     (diagnose.py): "effort" the RMS actuator force or torque, "effort/speed" that over the RMS
-    speed, "command" the RMS of the command channel `where`, "channel" the spread of channel
-    `where`. `neutral` is the value at which the effect vanishes (None: no such value, e.g. a
+    speed, "command" the peak of the command channel `where`, "channel" the spread of channel
+    `where`, "motion" the range of the joint's motion. `neutral` is the value at which the effect vanishes (None: no such value, e.g. a
     stiffness, or a shape parameter such as a time constant); `log` fits it on a log scale.
     """
 
@@ -231,10 +231,13 @@ def joint_compliance(patch, where, stiffness, damping_ratio=0.05):
     patch.spec_edits.append(edit)
 
 
-def backlash(patch, where, width):
-    """Dead band of `width` (rad) between joint `where` and its link, hard stops at +-width/2."""
+def backlash(patch, where, width, position=0.0):
+    """Dead band of `width` (rad) between joint `where` and its link, hard stops at +-width/2; the
+    link starts at `position` x width/2 within it (+1: against the positive stop, so only a
+    positive drive can open the band: a bolted root that slips one way, tightened the other)."""
     def edit(spec):
         j = _extra_hinge(spec, where, "backlash")
+        j.ref = position * width / 2
         j.range = [-width / 2, width / 2]
         j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
         j.solref_limit = LIMIT_SOLREF
@@ -316,7 +319,7 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4, log=True), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0, log=True)), "joint"),
     "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True)), "joint"),
     "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.01, 20.0, 1.0, log=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
-    "backlash": (backlash, (P("width", "rad", 1e-5, 0.05, 1e-3, log=True),), "joint"),
+    "backlash": (backlash, (P("width", "rad", 1e-5, 0.5, 0.15, "motion", log=True), P("position", "-", -1.0, 1.0, 0.0)), "joint"),
     "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),
     "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),
     "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "link"),
