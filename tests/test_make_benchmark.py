@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from watflex_sim import read_recording
+from watflex_sim import diagnose, read_recording
 from watflex_sim.effects import CATALOGUE
 from watflex_sim.resim import resimulate
 from watflex_sim.rigdesc import load_rig
@@ -87,16 +87,31 @@ def test_sidecars_conceal_the_truth(bench):
                 assert not [v for v in case["parameters"].values() if v not in (0.0, 1.0) and v in numbers]
 
 
-def _excess(rec, nominal, rig) -> float:
-    """Largest RMS(measured - nominal) / channel noise over the measured channels (noise alone ~1)."""
-    out = 0.0
+def _excess(rec, nominal, rig) -> tuple[float, float]:
+    """Over the measured channels, the largest RMS(measured - nominal) and the largest |mean| of
+    that difference, both / channel noise (noise alone: ~1 and ~1/sqrt(samples))."""
+    rms = bias = 0.0
     for c, spec in rig.channels.items():
         if spec["kind"] == "measured" and spec.get("noise") and c in rec.channels:
             d = rec.channels[c] - nominal.channels[c]
             d = d[np.isfinite(d)]
             if d.size > 10 and np.std(nominal.channels[c][np.isfinite(nominal.channels[c])]) > 0:
-                out = max(out, float(np.sqrt(np.mean(d**2))) / spec["noise"])
-    return out
+                rms = max(rms, float(np.sqrt(np.mean(d**2))) / spec["noise"])
+                bias = max(bias, abs(float(np.mean(d))) / spec["noise"])
+    return rms, bias
+
+
+def _visible(recs, rig) -> tuple[float, float]:
+    """(RMS, bias) excess of the most changed recording against its nominal noise-free re-simulation."""
+    both = [_excess(r, resimulate(r), rig) for r in recs]
+    return max(b[0] for b in both), max(b[1] for b in both)
+
+
+def _clear(rms: float, bias: float) -> bool:
+    """Clearly beyond the noise: 3x its RMS, or a mean shift of half of it (~10 sigma of the mean
+    over 500 samples; a sensor offset on a channel the loop ignores can be no larger than
+    ~1.75x noise within the catalogue's bounds, laser motor_current)."""
+    return rms > 3.0 or bias > 0.5
 
 
 def test_effects_are_visible_above_noise(bench):
@@ -107,8 +122,70 @@ def test_effects_are_visible_above_noise(bench):
         if case["effect"]:
             rig = load_rig(case["rig"])
             recs = [read_recording(out / rel) for rel in case["recordings"]]
-            excess = max(_excess(r, resimulate(r), rig) for r in recs)
-            assert excess > 3.0, (case, excess)
+            excess = _visible(recs, rig)
+            assert _clear(*excess), (case, excess)
+
+
+REENABLED = [("laser_arm", "backlash", "hub"), ("watflex", "backlash", "elbow"),
+             ("laser_arm", "sensor_gain", "motor_current"), ("laser_arm", "sensor_offset", "motor_current"),
+             ("laser_arm", "delay", "tip_sensor"), ("watflex", "link_stiffness_change", "link1"),
+             ("watflex", "sensor_offset", "strain_1C"), ("laser_arm", "joint_compliance", "hub"),
+             ("watflex", "joint_compliance", "elbow")]
+
+
+@pytest.mark.parametrize("rig,effect,where", REENABLED)
+def test_weak_end_is_visible(rig, effect, where):
+    """The weakest magnitude of RANGES shows above the noise, for the effects and places that
+    simulator fixes made possible (backlash a hard stop, sensor effects on monitored channels and
+    delays from the first reading, a stiffer clamp) and link 1 with the shoulder locked."""
+    assert where in mb.places(rig, effect)
+    weak = {name: span[0] for name, (kind, *span) in mb._ranges(rig, effect, where).items()}
+    runs = mb.experiments(rig, 0.5, np.random.default_rng(1))
+    recs = [rec for _, rec in mb.simulate_case(runs, [dict(effect=effect, where=where, **weak)], {})]
+    excess = _visible(recs, load_rig(rig))
+    assert _clear(*excess), excess
+
+
+def test_places():
+    """Watflex: only places the locked-shoulder experiments excite; laser arm: every allowed one."""
+    every = {w for e in CATALOGUE for w in mb.places("watflex", e)}
+    assert {"elbow", "link1", "link2", "strain_1A", "strain_1B", "strain_1C", "strain_2A", "elbow_angle",
+            "elbow_torque_cmd", "command", "end_effector_bearing"} <= every
+    assert not [w for w in every if w.startswith("shoulder")] and "elbow_bearing" not in every
+    for effect, where in load_rig("laser_arm").effects.items():
+        if mb.why_skipped("laser_arm", effect) is None:
+            assert mb.places("laser_arm", effect) == where
+    assert mb.why_skipped("laser_arm", "backlash") is None and mb.why_skipped("watflex", "backlash") is None
+
+
+def test_ranges_within_catalogue_bounds():
+    """Every RANGES value (both signs of "±", both ratios of "×") within its catalogue bounds; the
+    data-scaled ones are checked on the data (test_truth_within_diagnosis_bounds)."""
+    for rig, table in mb.RANGES.items():
+        for key, ranges in table.items():
+            effect, _, where = key.partition(":")
+            assert effect in load_rig(rig).effects and (not where or where in load_rig(rig).effects[effect])
+            params = {p.name: p for p in CATALOGUE[effect][1]}
+            for name, (kind, *span) in ranges.items():
+                p = params[name]
+                if p.scale:
+                    continue
+                values = span + ([-v for v in span] if kind == "±" else []) + ([1 / v for v in span] if kind == "×" else [])
+                assert all(p.low <= v <= p.high for v in values), (rig, key, name, values, p)
+
+
+def test_truth_within_diagnosis_bounds(bench):
+    """Each true parameter lies within the catalogue bounds in the diagnosis' units (scaled ones
+    times diagnose.scale_of of the case's recordings)."""
+    out, truth = bench
+    for case in truth["cases"]:
+        if not case["effect"]:
+            continue
+        data = diagnose.prepare([read_recording(out / rel) for rel in case["recordings"]], case["recordings"])
+        for p in CATALOGUE[case["effect"]][1]:
+            if p.name in case["parameters"]:
+                scale = diagnose.scale_of(data, p, case["where"])
+                assert p.low * scale <= case["parameters"][p.name] <= p.high * scale, (case, p, scale)
 
 
 def test_existing_benchmark_is_refused(bench):

@@ -7,10 +7,11 @@ A case is what a user would bring: three simulated recordings (noise on, a seed 
 rig with one catalogue effect added, in diagnosis order (the diagnosis holds out the LAST one):
   laser_arm: 2.5 mm tip step positive, negative (0.7 kg), then a step at another paper payload;
   watflex (shoulder locked): elbow step +0.5 rad, -0.5 rad, then the 0.1 rad staircase.
-Each effect gets a place (`where`) the rig description allows (Watflex: elbow-side places,
-the ones the elbow experiments excite) and a magnitude from RANGES: visible above the rig
-noise but modest. One concealment per case (CONCEALMENTS). `--clean` cases per rig have no
-effect, only the rig's parameters perturbed within their tolerances.
+Each effect gets a place (`where`) the rig description allows, at random (Watflex: the places
+the elbow experiments excite: elbow-side ones, link 1 and its strain bridges 1A-1C, which the
+swinging elbow shakes), and a magnitude from RANGES: visible above the rig noise but modest.
+One concealment per case (CONCEALMENTS). `--clean` cases per rig have no effect, only the
+rig's parameters perturbed within their tolerances.
 
 Written: DIR/cases/<id>/<stem>.csv + .json (sidecars carry no effect, parameters or notes;
 case ids are opaque) and DIR/truth.json (the answers; schema in `make_cases`). DIR must not
@@ -18,9 +19,9 @@ already hold a benchmark. Same seed, same arguments: byte-identical files.
 
 Skipped (SKIPPED, listed with the reason at the end of --help): laser_arm presliding and
 dwell_time_stiction (no nominal hub friction to act on), laser_arm structural_damping (does
-not show), backlash on both rigs (the simulator's band is a soft spring: never modest), the
-laser's motor_current sensor effects and tip_sensor delay (simulator faults); Watflex places
-the locked-shoulder experiments do not excite; effects a rig description does not allow.
+not show within the catalogue's bounds); Watflex places the locked-shoulder experiments do
+not excite (the shoulder, its angle and torque command, the elbow bearing); effects a rig
+description does not allow.
 """
 from __future__ import annotations
 
@@ -51,26 +52,38 @@ SMALL = 0.2  # "small against noise": magnitudes from the weakest 20 % of the ra
 # Chosen by simulating each effect at both ends on the three 6 s recordings, noise-free, against
 # the nominal noise-free run: at the weak end the mean NRMSE over the compared channels is about
 # the noise floor (laser 0.07, Watflex 0.03) and the most affected channel moves by several times
-# its rig noise (rigs/*.toml); at the strong end the mean NRMSE stays below ~0.4.
+# its rig noise (rigs/*.toml); at the strong end the mean NRMSE stays below ~0.4. Every value
+# lies within the catalogue's bounds (effects.CATALOGUE; a scaled one times its size from the
+# data, diagnose.scale_of, noted below as "bound"), and current_saturation limits between 0.3
+# and 0.9 x the robust peak command.
 RANGES = {
     "laser_arm": {  # motor torque RMS 0.5 N m over the 0.4 s transient, 0.2 N m over 6 s; hub 2 mrad
         "coulomb_friction": {"torque_positive": ("+", 0.03, 0.12), "torque_negative": ("+", 0.03, 0.12)},  # N m
         "stribeck_friction": {"breakaway_positive": ("+", 0.04, 0.15), "breakaway_negative": ("+", 0.04, 0.15),
                               "v_s": ("~", 0.005, 0.03)},  # N m, rad/s
         "viscous_friction": {"coefficient": ("+", 5.0, 20.0), "coefficient_negative": ("+", 5.0, 20.0)},  # N m s/rad
-        "position_dependent_friction": {"amplitude": ("±", 0.04, 0.1), "period": ("~", 0.01, 0.05),
+        "position_dependent_friction": {"amplitude": ("±", 0.04, 0.1), "period": ("~", 0.012, 0.05),
                                         "phase": ("~", -math.pi, math.pi), "spring": ("=", 0.0)},  # N m, rad
-        "joint_compliance": {"stiffness": ("+", 3e4, 6e3)},  # N m/rad; <= 1e5 keeps the clamp stable at 0.1 ms
+        "backlash": {"width": ("+", 3e-5, 1.5e-4)},  # rad: mean NRMSE 0.14..0.34 (0.10 as the width -> 0:
+        # the clamp's armature alone moves motor_current)
+        "joint_compliance": {"stiffness": ("+", 1.5e4, 3e3)},  # N m/rad: mean NRMSE 0.11..0.37; bound 3e4
         "payload": {"mass": ("+", 0.2, 1.0)},  # kg
         "link_stiffness_change": {"ratio": ("+", 0.65, 0.45)},  # softer (cracked/loose): stiffer hardly shows
         "actuator_gain": {"ratio": ("×", 1.1, 1.4)},
-        "actuator_offset": {"offset": ("±", 0.008, 0.03)},  # V (RMS command 0.08 V)
-        "current_saturation": {"limit": ("+", 0.85, 0.55)},  # V (peak command 1.05 V)
+        "actuator_offset": {"offset": ("±", 0.008, 0.03)},  # V (robust peak command 0.8 V: bound 0.4 V)
+        "current_saturation": {"limit": ("+", 0.75, 0.55)},  # V: 0.87..0.6 x the robust peak command
+        # (0.86..0.92 V once saturated; 0.8 V nominal, 1.05 V at most); mean NRMSE 0.17..0.41
         "sensor_gain:tip_sensor": {"ratio": ("×", 1.08, 1.25)},  # tolerance 2 %
         "sensor_gain:hub_angle": {"ratio": ("×", 1.05, 1.2)},
-        "sensor_offset:tip_sensor": {"offset": ("±", 0.12, 0.33)},  # V: the loop hides it, the hub shows it
-        "sensor_offset:hub_angle": {"offset": ("±", 4e-5, 1.5e-4)},  # rad: 2-8 encoder counts
+        "sensor_gain:motor_current": {"ratio": ("×", 1.4, 1.9)},  # monitored only: mean NRMSE 0.07..0.12,
+        # 0.29..0.47 on it (RMS change 1.6..3.7 x its noise over 6 s)
+        "sensor_offset:tip_sensor": {"offset": ("±", 0.12, 0.3)},  # V: the loop hides it, the hub shows it;
+        # bound 0.33 V (half the tip's spread)
+        "sensor_offset:hub_angle": {"offset": ("±", 4e-5, 1.3e-4)},  # rad: 2-7 encoder counts; bound 1.6e-4
+        "sensor_offset:motor_current": {"offset": ("±", 0.004, 0.007)},  # A: 1..1.75 x noise, the most the
+        # bound allows (half the current's 0.0165 A spread: 0.0082 A); NRMSE 0.27..0.47 on it
         "delay": {"seconds": ("+", 0.002, 0.008)},  # s
+        "delay:tip_sensor": {"seconds": ("+", 0.001, 0.005)},  # s (1 ms ticks): mean NRMSE 0.16..0.35
     },
     "watflex": {  # elbow: break-away ~5.5 N m, RMS torque 4.5 N m, peak 30 N m, RMS speed 0.23 rad/s
         "coulomb_friction": {"torque_positive": ("+", 0.4, 1.5), "torque_negative": ("+", 0.4, 1.5)},  # N m
@@ -81,38 +94,36 @@ RANGES = {
         "dwell_time_stiction": {"gain": ("+", 0.3, 0.8), "time_constant": ("~", 0.3, 1.0)},  # -, s; > 0.8 sticks
         "position_dependent_friction": {"amplitude": ("±", 0.5, 2.0), "period": ("~", 0.3, 1.5),
                                         "phase": ("~", -math.pi, math.pi), "spring": ("=", 0.0)},  # N m, rad
-        "joint_compliance": {"stiffness": ("+", 3e3, 6e2)},  # N m/rad; link 2 root hinge 630; > 4e3 unstable
+        "backlash": {"width": ("+", 2e-3, 2.5e-2)},  # rad: mean NRMSE 0.035..0.3
+        "joint_compliance": {"stiffness": ("+", 3e3, 4e2)},  # N m/rad: mean NRMSE 0.026..0.18; bound 3e4
         "payload": {"mass": ("+", 0.15, 1.0)},  # kg on the 8.1 kg end effector
-        "link_stiffness_change": {"ratio": ("×", 1.25, 1.6)},  # tolerance 5 %
-        "structural_damping": {"ratio": ("+", 5.0, 20.0)},  # less damping than nominal hardly shows
+        "link_stiffness_change": {"ratio": ("×", 1.25, 1.6)},  # link 2; tolerance 5 %
+        "link_stiffness_change:link1": {"ratio": ("×", 1.08, 1.2)},  # mean NRMSE 0.15..0.34 (1.25: 0.41)
+        "structural_damping": {"ratio": ("+", 5.0, 20.0)},  # both links; less damping hardly shows
         "actuator_gain": {"ratio": ("×", 1.1, 1.35)},
-        "actuator_offset": {"offset": ("±", 0.4, 1.5)},  # N m
-        "current_saturation": {"limit": ("+", 22.0, 12.0)},  # N m (peak command 30 N m)
+        "actuator_offset": {"offset": ("±", 0.4, 1.5)},  # N m (robust peak command 27.5 N m: bound 13.7)
+        "current_saturation": {"limit": ("+", 22.0, 12.0)},  # N m: 0.77..0.41 x the robust peak command
+        # (27.5 N m nominal, 28-29.6 saturated)
         "sensor_gain:elbow_angle": {"ratio": ("×", 1.05, 1.2)},
         "sensor_gain": {"ratio": ("×", 1.1, 1.3)},  # strain bridges
-        "sensor_offset:elbow_angle": {"offset": ("±", 5e-3, 2e-2)},  # rad
-        "sensor_offset": {"offset": ("±", 0.04, 0.2)},  # V on strain bridges of ~1 V spread (noise 2.7 mV)
+        "sensor_offset:elbow_angle": {"offset": ("±", 5e-3, 2e-2)},  # rad; bound 0.08
+        "sensor_offset": {"offset": ("±", 0.04, 0.2)},  # V on strain bridges of 1-2 V spread (noise 2 mV;
+        # bound: half the spread, 0.48 V on 2B)
         "delay": {"seconds": ("+", 0.005, 0.02)},  # s
         "bearing_friction": {"force": ("+", 0.1, 0.8)},  # N at the end effector, 0.7 m from the elbow
         "table_tilt": {"angle": ("±", 5e-3, 2e-2)},  # rad
     },
 }
-# Watflex places the elbow experiments excite (the shoulder is locked); laser arm: all allowed.
-EXCITED = {"watflex": {"elbow", "link2", "tip", "elbow_torque_cmd", "elbow_angle", "strain_2A", "strain_2B",
-                       "command", "end_effector_bearing", "table"}}
+# Watflex places the elbow experiments excite (the shoulder is locked, the elbow swinging shakes
+# link 1: its stiffness and the 1A-1C bridges show; the elbow bearing does not move); laser arm: all.
+EXCITED = {"watflex": {"elbow", "link1", "link2", "tip", "elbow_torque_cmd", "elbow_angle", "strain_1A",
+                       "strain_1B", "strain_1C", "strain_2A", "strain_2B", "command", "end_effector_bearing",
+                       "table"}}
 SKIPPED = {  # (rig, effect) or (rig, effect, where): why no case is made
     ("laser_arm", "presliding"): "the hub has no nominal friction for LuGre bristles to act on: no change",
     ("laser_arm", "dwell_time_stiction"): "the hub has no nominal friction for dwell time to raise: no change",
-    ("laser_arm", "structural_damping"): "30x beam damping changes the tip NRMSE by 0.008 (noise 0.015); "
-                                         "below 0.5x the beam diverges at the 0.1 ms step",
-    ("laser_arm", "backlash"): "the band's joint limit is MuJoCo-soft on a 1e-3 kg m^2 clamp: any width "
-                               "(even 1e-5 rad) makes the loop chatter, NRMSE > 10",
-    ("watflex", "backlash"): "the band's joint limit is MuJoCo-soft on a 1e-3 kg m^2 clamp: link 2 swings "
-                             "0.1 rad on a 1e-4 rad band, NRMSE ~0.7 for any width",
-    ("laser_arm", "sensor_gain", "motor_current"): "sensor effects never reach motor_current (engine applies "
-                                                   "them to the observed channels only)",
-    ("laser_arm", "sensor_offset", "motor_current"): "sensor effects never reach motor_current",
-    ("laser_arm", "delay", "tip_sensor"): "a sensor delay feeds NaN to the controller at the start: diverges",
+    ("laser_arm", "structural_damping"): "30x beam damping (the catalogue's top) moves the tip by 0.6x its "
+                                         "noise (NRMSE 0.009), 0.5x (its bottom) by nothing",
 }
 DIRECTIONAL = {"coulomb_friction": ("torque_positive", "torque_negative"),
                "stribeck_friction": ("breakaway_positive", "breakaway_negative"),
