@@ -141,3 +141,22 @@ def test_blind_laser_diagnosis_names_coulomb_friction(tmp_path):
     assert first["parameters"]["torque_positive"] == pytest.approx(0.6, rel=0.15)
     assert first["parameters"]["torque_negative"] == pytest.approx(0.3, rel=0.15)
     assert report["held_out"]["after"]["nrmse"] < 0.5 * report["held_out"]["before"]["nrmse"]
+    nominal, refit = report["steps"][:2]  # a refit that worsens held-out data is not kept
+    assert refit["held_out_nrmse"] <= nominal["held_out_nrmse"]
+    timing = report["timing"]  # wall time (s) and simulation jobs per stage
+    assert {"nominal", "refit", "signatures", "candidate fits"} <= set(timing)
+    assert all(row["jobs"] > 0 for kind, row in timing.items() if kind != "verdict")
+
+
+def test_shortlist_fits_screening_ties_too():
+    """shortlist(): the top two by screening gain, plus any within 5 % of the second (a tie in
+    the screening is no evidence), never more than four, never one that explains nothing."""
+    from watflex_sim.diagnose import Candidate, shortlist
+
+    def ranked(*gains):
+        return [Candidate(f"e{i}", "x", {}, {}, {}, gain=g) for i, g in enumerate(gains)]
+
+    assert [c.effect for c in shortlist(ranked(0.69, 0.689, 0.688, 0.2))] == ["e0", "e1", "e2"]
+    assert [c.effect for c in shortlist(ranked(0.69, 0.5, 0.45, 0.44))] == ["e0", "e1"]
+    assert len(shortlist(ranked(0.5, 0.5, 0.5, 0.5, 0.5))) == 4
+    assert shortlist(ranked(0.0, 0.0)) == []

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
@@ -81,8 +82,9 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         last = len(recordings) - 1
         for i, rec in enumerate(recordings):
             train.append((rec.time - rec.time[0] < FIT_SECONDS) & (i != last))
-        how = (f"fit on the first {FIT_SECONDS:g} s of " + ", ".join(names[:-1]) + f"; judged on {names[-1]}"
-               + " and the rest of the others")
+        longer = any(r.time[-1] - r.time[0] > FIT_SECONDS for r in recordings[:-1])
+        how = (f"fit on {', '.join(names[:-1])}" + (f" (their first {FIT_SECONDS:g} s)" if longer else "")
+               + f"; judged on {names[-1]}" + (" and the rest of the others" if longer else ""))
     else:
         t = recordings[0].time - recordings[0].time[0]
         train.append((t // BLOCK_S) % 2 == 0)
@@ -202,10 +204,12 @@ class Runner:
         _hold(data)
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
+        self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
         self.pool = ProcessPoolExecutor(workers, initializer=_hold, initargs=(data,)) if workers > 1 else None
 
     def map(self, fn, jobs: list) -> list:
         """fn over jobs, in order; reports progress as jobs finish."""
+        self.jobs += len(jobs)
         if self.pool is None or len(jobs) <= 1:
             out = []
             for job in jobs:
@@ -420,8 +424,9 @@ def scale_of(data: Data, param, where: str) -> float:
 
 
 SWITCH_LEVELS = (1.0, 0.1, 0.01)  # x start of a switch candidate's log-scaled size (width, stiffness, ...)
-LARGE_PROBE = 4.0  # x start: friction-like levels are probed small and large, since a small
-# dry friction can move a closed loop the other way from a large one (stick-slip is not linear)
+LARGE_PROBE = 4.0  # x (start - neutral): friction-like levels and `wide` parameters are probed
+# small and large, since a small dry friction can move a closed loop the other way from a large
+# one (stick-slip is not linear) and a mode frequency goes with the square root of a stiffness
 
 
 @dataclass
@@ -429,7 +434,7 @@ class Candidate:
     """A catalogue effect at one place: its parameters (physical units) with slots, and its
     signature: the change of the training residual per unit of each parameter that has a
     neutral value, or (a 'switch') the change the whole effect at its start values makes.
-    Effort-scaled parameters are probed at two levels (start and LARGE_PROBE x start)."""
+    Effort-scaled and `wide` parameters are probed at two levels (start and LARGE_PROBE x start)."""
 
     effect: str
     where: str
@@ -471,7 +476,7 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
         slots[p.name] = Slot(("effect", -1, p.name), p.low * size, p.high * size, p.log)
         if p.neutral is not None:
             neutral[p.name] = p.neutral * size
-    levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" for p in params) else (1.0,)
+    levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" or p.wide for p in params) else (1.0,)
     return Candidate(effect, where, start, slots, neutral, levels)
 
 
@@ -811,7 +816,16 @@ def _prune(data: Data, pairs: list[tuple[str, str]]) -> list[tuple[str, str]]:
 
 
 SCREEN_TOP = 2  # candidates fitted in full after the signature screening (one per worker)
+SCREEN_TIE = 0.95  # ... and any more that screen within 5 % of the last of those: a tie in the
+SCREEN_MAX = 4  # screening is no evidence (up to this many; friction laws often screen alike)
 FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one simulation each)
+
+
+def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Candidate]:
+    """The candidates to fit in full, from those ranked by screening gain: the first `screen_top`
+    that explain anything, and any more (to SCREEN_MAX) within SCREEN_TIE of the last of them."""
+    top = [c for c in ranked[:screen_top] if c.gain > 0]
+    return top + [c for c in ranked[screen_top:SCREEN_MAX] if top and c.gain >= SCREEN_TIE * top[-1].gain]
 
 
 def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, max_effects: int = 2,
@@ -821,28 +835,53 @@ def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, ma
     `progress(message)` hears each stage, `jobs_done(done, total)` each finished simulation job
     of a stage. Raises ConfigError for recordings that cannot be diagnosed together.
     """
-    say = progress or (lambda message: None)
     data = prepare(recordings, names)
     with Runner(data, workers, jobs_done) as runner:
-        return _diagnose(data, runner, max_effects, screen_top, say)
+        stages = Stages(progress or (lambda message: None), runner)
+        report = _diagnose(data, runner, max_effects, screen_top, stages)
+        stages("done", "done")
+        report["timing"] = stages.table
+        return report
 
 
-def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say) -> dict:
+class Stages:
+    """Names the stage in progress, tells the user, and adds up wall time (s) and simulation
+    jobs per kind of stage (the report's "timing"; a job is one simulation, or a whole candidate fit)."""
+
+    def __init__(self, say, runner: Runner):
+        self.say, self.runner = say, runner
+        self.table: dict[str, dict[str, float]] = {}
+        self.kind, self.t0, self.jobs0 = None, time.perf_counter(), 0
+
+    def __call__(self, kind: str, message: str) -> None:
+        now = time.perf_counter()
+        if self.kind is not None:
+            row = self.table.setdefault(self.kind, {"seconds": 0.0, "jobs": 0})
+            row["seconds"] += now - self.t0
+            row["jobs"] += self.runner.jobs - self.jobs0
+        self.kind, self.t0, self.jobs0 = kind, now, self.runner.jobs
+        if kind != "done":
+            self.say(message)
+
+
+def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say: Stages) -> dict:
     evaluate = evaluator(runner)
-    say("re-simulating with the nominal model")
+    say("nominal", "re-simulating with the nominal model")
     nominal = Model()
     sims_nominal = runner.simulate(nominal)
     if sims_nominal is None:
         raise ConfigError("the nominal model diverges on these recordings")
     free = rig_slots(data)
     r_nominal = residual_vector(data, sims_nominal)
-    say(f"refitting the {len(free)} nominal parameters within their tolerances")
+    say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
     at = np.array([_value(nominal, s) for s in free])
     rig_columns = jacobian(evaluate, nominal, free, at, r_nominal) if free else np.zeros((r_nominal.size, 0))
     current, _, _ = (levenberg(evaluate, nominal, free, at, rig_columns, 4, r_nominal, noise_cost(data)) if free
                      else (nominal, 0, None))
     sims = runner.simulate(current)
-    if sims is None:
+    if sims is None or fit_scores(data, sims, "held_out")["nrmse"] > fit_scores(data, sims_nominal, "held_out")["nrmse"]:
+        # a refit must earn its place on held-out data too: parameters pulled off their
+        # datasheet values to absorb an unmodelled effect would hide that effect
         current, sims = nominal, sims_nominal
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     mismatch = locate(data, sims)
@@ -852,7 +891,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     for round_ in range(max_effects):
         train_now = fit_scores(data, sims, "train")["nrmse"]
         if held <= NOISE_MARGIN * noise_held or train_now <= NOISE_MARGIN * noise_train:
-            say(f"NRMSE (held-out {held:.4f}, training {train_now:.4f}) within {NOISE_MARGIN:g} x what noise leaves "
+            say("verdict", f"NRMSE (held-out {held:.4f}, training {train_now:.4f}) within {NOISE_MARGIN:g} x what noise leaves "
                 f"({noise_held:.4f}, {noise_train:.4f}): nothing left to explain")
             break
         r0 = residual_vector(data, sims)
@@ -860,17 +899,17 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         # signatures are taken around the current model: an effect can look different once
         # another is in (a slip shows only where stiction lets the joint move)
         live = [make_candidate(data, e, w) for e, w in pairs]
-        say(f"round {round_ + 1}: taking the signatures of {len(live)} candidate effects "
+        say("signatures", f"round {round_ + 1}: taking the signatures of {len(live)} candidate effects "
             f"({sum(len(c.probes()) for c in live)} probe simulations)")
         signatures(data, runner, current, sims, r0, live)
         at = np.array([_value(current, s) for s in free])
         screen(live, rig_columns, free, at, r0)
         live.sort(key=lambda c: -c.gain)
         screened_report.append([{"effect": c.effect, "where": c.where, "explained": round(c.gain, 4)} for c in live[:8]])
-        top = [c for c in live[:screen_top] if c.gain > 0]
+        top = shortlist(live, screen_top)
         if not top:
             break
-        say(f"round {round_ + 1}: fitting the {len(top)} whose signatures match the residual best: "
+        say("candidate fits", f"round {round_ + 1}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
         results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS) for c in top])
         for r in results:
@@ -888,17 +927,18 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"]})
             break
+        say("polish", f"round {round_ + 1}: polishing {best['effect']} at {best['where']} and trying alternatives")
         best = polish(data, runner, best, held)
         alternative = offset_alternative(data, runner, current, best, train_now, held)
         if alternative is not None and alternative["score"] >= best["score"] - 1e-3:
-            say("asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
+            say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
             findings.append(_finding(alternative, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, train_now))
             offset = {**alternative, "effect": "actuator_offset", "where": alternative["model"].effects[-1]["where"]}
             findings.append(_finding(offset, alternative["model"], held, alternative["held_out"]["nrmse"], mismatch, train_now))
             best = alternative
         else:
             findings.append(_finding(best, best["model"], held, best["held_out"]["nrmse"], mismatch, train_now))
-        say(f"round {round_ + 1}: found {best['effect']} at {best['where']}: held-out NRMSE {held:.4f} -> {best['held_out']['nrmse']:.4f}")
+        say("verdict", f"round {round_ + 1}: found {best['effect']} at {best['where']}: held-out NRMSE {held:.4f} -> {best['held_out']['nrmse']:.4f}")
         current, sims = best["model"], best["sims"]
         held = best["held_out"]["nrmse"]
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})

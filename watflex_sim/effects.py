@@ -58,6 +58,7 @@ class Param:
     scale: str = ""
     neutral: float | None = None
     log: bool = False
+    wide: bool = False  # the diagnosis probes it at start and 4x further from neutral (strongly nonlinear)
 
 
 # --- knobs: what a refit parameter or an effect turns, by MuJoCo element name --------------
@@ -318,18 +319,18 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "viscous_friction": (viscous_friction, (P("coefficient", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0), P("coefficient_negative", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0)), "joint"),
     "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4, log=True), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0, log=True)), "joint"),
     "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True)), "joint"),
-    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.01, 20.0, 1.0, log=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
+    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.2, 200.0, 3.0, "motion", log=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
     "backlash": (backlash, (P("width", "rad", 1e-5, 0.5, 0.15, "motion", log=True), P("position", "-", -1.0, 1.0, 0.0)), "joint"),
     "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),
     "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),
-    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "link"),
-    "structural_damping": (structural_damping, (P("ratio", "-", 0.5, 30.0, 2.0, neutral=1.0),), "link"),
+    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0, wide=True),), "link"),
+    "structural_damping": (structural_damping, (P("ratio", "-", 0.5, 30.0, 2.0, neutral=1.0, wide=True),), "link"),
     "actuator_gain": (actuator_gain, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "command"),
     "actuator_offset": (actuator_offset, (P("offset", "command unit", -0.5, 0.5, 0.02, "command", 0.0),), "command"),
-    "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 3.0, 1.5, "command"),), "command"),
+    "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 1.5, 0.7, "command"),), "command"),
     "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95, neutral=1.0),), "channel"),
     "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel", 0.0),), "channel"),
-    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.004, neutral=0.0),), "command or channel"),
+    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.004, neutral=0.0, wide=True),), "command or channel"),
     "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0, neutral=0.0),), "bearing geom"),
     "table_tilt": (table_tilt, (P("angle", "rad", -0.05, 0.05, 0.001, neutral=0.0),), "rig"),
 }

@@ -124,4 +124,6 @@ def summary(report: dict) -> str:
     lines.append(f"held-out NRMSE {ho['before']['nrmse']:.4f} -> {ho['after']['nrmse']:.4f} ({ho['how']})")
     lines.append(f"all data: NRMSE {report['fit_before']['nrmse']:.4f} -> {report['fit_after']['nrmse']:.4f}, "
                  f"correlation {report['fit_before']['correlation']:.4f} -> {report['fit_after']['correlation']:.4f}")
+    if report.get("timing"):
+        lines.append("time: " + ", ".join(f"{k} {v['seconds']:.0f} s ({v['jobs']} jobs)" for k, v in report["timing"].items()))
     return "\n".join(lines)
