@@ -143,6 +143,8 @@ def test_blind_laser_diagnosis_names_coulomb_friction(tmp_path):
     assert report["held_out"]["after"]["nrmse"] < 0.5 * report["held_out"]["before"]["nrmse"]
     nominal, refit = report["steps"][:2]  # a refit that worsens held-out data is not kept
     assert refit["held_out_nrmse"] <= nominal["held_out_nrmse"]
+    best_fit = report["candidates"][0][0]  # round 1's fitted candidates, best score first
+    assert best_fit["effect"] == "coulomb_friction" and best_fit["held_out_gain"] > 0.5
     timing = report["timing"]  # wall time (s) and simulation jobs per stage
     assert {"nominal", "refit", "signatures", "candidate fits"} <= set(timing)
     assert all(row["jobs"] > 0 for kind, row in timing.items() if kind != "verdict")
@@ -160,3 +162,19 @@ def test_shortlist_fits_screening_ties_too():
     assert [c.effect for c in shortlist(ranked(0.69, 0.5, 0.45, 0.44))] == ["e0", "e1"]
     assert len(shortlist(ranked(0.5, 0.5, 0.5, 0.5, 0.5))) == 4
     assert shortlist(ranked(0.0, 0.0)) == []
+
+
+def test_a_delay_is_searched_in_whole_control_periods():
+    """step_search(): a delay acts in whole 1 ms ticks (effects.delay), so its residual has no
+    gradient; from a linear estimate of 2.4 ms the search tries 1-4 ms and keeps the 3 ms whose
+    residual vanishes, never the neutral 0 ms."""
+    from watflex_sim.diagnose import Candidate, Model, Slot, step_search
+
+    def evaluate(models):
+        return [np.full(5, round(m.effects[-1]["seconds"] / 1e-3) - 3.0) for m in models]
+
+    cand = Candidate("delay", "tip_sensor", {"seconds": 1e-3}, {"seconds": Slot(("effect", -1, "seconds"), 0.0, 0.05)},
+                     {"seconds": 0.0}, estimate={"seconds": 2.4e-3}, quanta={"seconds": 1e-3})
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(3e-3)
+    cand.estimate["seconds"] = 0.0  # an estimate at neutral still tries a delay
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(2e-3)

@@ -14,7 +14,7 @@ Recordings of the laser arm are simulated (noise on) with the two defects the pa
 The recordings are what the paper's authors had: 2.5 mm tip steps, both directions, two of the
 paper's payloads (0.7 and 1.15 kg). `watflex_sim.diagnose.diagnose` sees only the recordings.
 The tool writes DIR/recordings/*, DIR/report/ (as `watflex-sim diagnose`), prints the stages
-(nominal -> refit -> + each finding) with their NRMSE, and draws docs/laser_demo.png: the tip
+(nominal -> refit -> + each finding) with their NRMSE, and draws DIR/laser_demo.png: the tip
 sensor of a clockwise and an anticlockwise step, measured and simulated at each stage.
 """
 from __future__ import annotations
@@ -39,7 +39,6 @@ from watflex_sim.recording import read_recording  # noqa: E402
 from watflex_sim.report import summary, write_report  # noqa: E402
 from watflex_sim.resim import resimulate  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 SLIP_AT_TIP_M = 0.17e-3  # m, paper section 5
 TRUTH = [
     dict(effect="coulomb_friction", where="hub", torque_positive=2.778, torque_negative=0.926),  # N m, paper section 4
@@ -87,8 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("laser_demo"), help="output directory (default ./laser_demo)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed of the first recording (default 0)")
     parser.add_argument("--duration", type=float, default=3.0, help="length of each recording, s (default 3)")
-    parser.add_argument("--figure", type=Path, default=ROOT / "docs" / "laser_demo.png", help="figure path")
+    parser.add_argument("--figure", type=Path, help="figure path (default DIR/laser_demo.png; the README's is docs/laser_demo.png)")
     args = parser.parse_args(argv)
+    args.figure = args.figure or args.out / "laser_demo.png"
     if args.duration < 0.5:
         print("error: --duration must be at least 0.5 s (the step comes at 0.1 s)", file=sys.stderr)
         return 2

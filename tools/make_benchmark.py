@@ -252,6 +252,9 @@ def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float) 
     drop = ("elbow_angle",) if concealment == "indirect channel" else ()
     for _ in range(MAX_DRAWS):
         parameters = draw(_ranges(rig, effect, where), rng, small=concealment == "small against noise")
+        for param in CATALOGUE[effect][1]:  # the truth is what the simulator does: a delay in whole ticks
+            if param.quantum and param.name in parameters:
+                parameters[param.name] = max(1, round(parameters[param.name] / param.quantum)) * param.quantum
         if one_side:
             parameters[DIRECTIONAL[effect][int(rng.integers(2))]] = 0.0
         refit = perturbed_parameters(rig, rng) if concealment == "mixed with parameter error" else {}

@@ -445,6 +445,7 @@ class Candidate:
     signature: dict[float, dict[str, np.ndarray]] = field(default_factory=dict)  # level -> parameter -> column
     estimate: dict[str, float] = field(default_factory=dict)  # linear estimate from the best signature
     gain: float = 0.0  # screening: fraction of the training cost the signature explains
+    quanta: dict[str, float] = field(default_factory=dict)  # parameters acting in whole steps: the step
 
     def model(self, base: Model, values: dict[str, float]) -> Model:
         return Model(base.effects + [dict(effect=self.effect, where=self.where, **values)], dict(base.parameters))
@@ -477,7 +478,8 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
         if p.neutral is not None:
             neutral[p.name] = p.neutral * size
     levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" or p.wide for p in params) else (1.0,)
-    return Candidate(effect, where, start, slots, neutral, levels)
+    quanta = {p.name: p.quantum for p in params if p.quantum > 0}
+    return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta)
 
 
 # --- signatures: which candidate's fingerprint the residual carries ----------------------------
@@ -598,11 +600,30 @@ def effect_slots_of(data: Data, model: Model) -> list[Slot]:
     slots = []
     for i, effect in enumerate(model.effects):
         for p in CATALOGUE[effect["effect"]][1]:
-            if p.name in effect:
+            if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
                 size = scale_of(data, p, effect["where"])
                 low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
                 slots.append(Slot(("effect", i, p.name), low, high, p.log))
     return slots
+
+
+QUANTUM_STEPS = 2  # a quantised parameter tries its rounded estimate and this many steps either side
+
+
+def step_search(evaluate, cand: Candidate, base: Model) -> dict[str, float]:
+    """The candidate's start values: its linear estimate, with each quantised parameter (a delay
+    in whole control periods has no gradient) set to the best of the rounded estimate and its
+    neighbours, never the neutral 0 steps."""
+    values = dict(cand.estimate)
+    for name, quantum in cand.quanta.items():
+        slot, k0 = cand.slots[name], round(values[name] / quantum)
+        grid = [k * quantum for k in range(k0 - QUANTUM_STEPS, k0 + QUANTUM_STEPS + 1)
+                if k >= 1 and slot.low <= k * quantum <= slot.high]
+        if grid:
+            costs = [math.inf if r is None else float(r @ r)
+                     for r in evaluate([cand.model(base, {**values, name: v}) for v in grid])]
+            values[name] = grid[int(np.argmin(costs))]
+    return values
 
 
 def fit_candidate(args) -> dict:
@@ -611,13 +632,14 @@ def fit_candidate(args) -> dict:
     of its own parameters by finite differences there; return its scores."""
     base, cand, rig_columns, iters = args
     data = _DATA
-    trial = cand.model(base, cand.estimate)
+    evaluate = evaluator(None)
+    values = step_search(evaluate, cand, base) if cand.quanta else cand.estimate
+    trial = cand.model(base, values)
     index = len(trial.effects) - 1
-    effect_slots = [Slot(("effect", index, n), s.low, s.high, s.log) for n, s in cand.slots.items()]
+    effect_slots = [Slot(("effect", index, n), s.low, s.high, s.log) for n, s in cand.slots.items() if n not in cand.quanta]
     earlier = effect_slots_of(data, base)  # the effects found before are refit with it
     free = effect_slots + earlier + rig_slots(data)
-    x0 = [cand.estimate[n] for n in cand.slots] + [_value(base, s) for s in earlier + rig_slots(data)]
-    evaluate = evaluator(None)
+    x0 = [values[n] for n in cand.slots if n not in cand.quanta] + [_value(base, s) for s in earlier + rig_slots(data)]
     try:
         lo = np.array([s.to_internal(s.low) for s in free])
         u0 = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, [s.to_internal(s.high) for s in free])
@@ -887,7 +909,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     mismatch = locate(data, sims)
     noise, noise_train, noise_held = noise_nrmse(data), noise_nrmse(data, "train"), noise_nrmse(data, "held_out")
     held = fit_scores(data, sims, "held_out")["nrmse"]
-    findings, rejected, screened_report = [], [], []
+    findings, rejected, screened_report, fitted_report = [], [], [], []
     for round_ in range(max_effects):
         train_now = fit_scores(data, sims, "train")["nrmse"]
         if held <= NOISE_MARGIN * noise_held or train_now <= NOISE_MARGIN * noise_train:
@@ -922,6 +944,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             r["train_gain"] = (train_now - r["train"]["nrmse"]) / train_now
             r["held_gain"] = (held - r["held_out"]["nrmse"]) / held
             r["score"] = r["train_gain"] + r["held_gain"] - MIN_GAIN * r["n_params"]
+        fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
+                               "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
+                               "score": round(r["score"], 4)} for r in sorted(fitted, key=lambda r: -r["score"])])
         best = max(fitted, key=lambda r: r["score"])
         if best["train_gain"] < MIN_GAIN * best["n_params"] or best["held_gain"] < MIN_HELD_GAIN:
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
@@ -963,6 +988,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "noise_nrmse": noise,
         "steps": steps,
         "screening": screened_report,
+        "candidates": fitted_report,
         "rejected": rejected,
         "patch": {"effects": current.effects, "parameters": current.parameters},
         "sims": {"nominal": sims_nominal, "final": sims},

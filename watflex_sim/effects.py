@@ -59,6 +59,7 @@ class Param:
     neutral: float | None = None
     log: bool = False
     wide: bool = False  # the diagnosis probes it at start and 4x further from neutral (strongly nonlinear)
+    quantum: float = 0.0  # it acts in whole steps of this (a delay in control periods): fitted by trying steps
 
 
 # --- knobs: what a refit parameter or an effect turns, by MuJoCo element name --------------
@@ -330,7 +331,7 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 1.5, 0.7, "command"),), "command"),
     "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95, neutral=1.0),), "channel"),
     "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel", 0.0),), "channel"),
-    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.004, neutral=0.0, wide=True),), "command or channel"),
+    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.001, neutral=0.0, wide=True, quantum=1e-3),), "command or channel"),
     "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0, neutral=0.0),), "bearing geom"),
     "table_tilt": (table_tilt, (P("angle", "rad", -0.05, 0.05, 0.001, neutral=0.0),), "rig"),
 }
