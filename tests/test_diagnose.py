@@ -73,12 +73,16 @@ def test_emps_diagnosis_finds_coulomb_and_offset_and_the_published_figures(tmp_p
     effects = [f["effect"] for f in report["findings"]]
     assert effects[:2] in (["coulomb_friction", "actuator_offset"], ["actuator_offset", "coulomb_friction"]), effects
     found = {f["effect"]: f["parameters"] for f in report["findings"]}
-    fc = 0.5 * (found["coulomb_friction"]["torque_positive"] + found["coulomb_friction"]["torque_negative"])
-    offset_n = -found["actuator_offset"]["offset"] * GTAU * report["refit_parameters"]["drive_gain"]["ratio"]
-    mass = report["refit_parameters"]["mass"]["value"]
+    # The plant is g gtau (u + offset) = M qdd + Fv qd + Fc sign(qd) with g the refit drive-gain ratio;
+    # the published model has g = 1, so it identifies M / g, Fv / g, Fc / g and -gtau offset.
+    g = report["refit_parameters"].get("drive_gain", {}).get("ratio", 1.0)
+    fc = 0.5 * (found["coulomb_friction"]["torque_positive"] + found["coulomb_friction"]["torque_negative"]) / g
+    offset_n = -found["actuator_offset"]["offset"] * GTAU
+    mass = report["refit_parameters"]["mass"]["value"] / g
     fv = report["refit_parameters"]["viscous"]["value"]
     if "viscous_friction" in found:  # direction-dependent viscous on top: compare its mean
         fv += 0.5 * (found["viscous_friction"]["coefficient"] + found["viscous_friction"]["coefficient_negative"])
+    fv /= g
     assert mass == pytest.approx(95.1089, rel=0.05)
     assert fv == pytest.approx(203.5034, rel=0.05)
     assert fc == pytest.approx(20.3935, rel=0.05)
@@ -178,3 +182,22 @@ def test_a_delay_is_searched_in_whole_control_periods():
     assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(3e-3)
     cand.estimate["seconds"] = 0.0  # an estimate at neutral still tries a delay
     assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(2e-3)
+
+
+def test_clean_recordings_with_parameter_error_are_nothing_missing():
+    """The verdict that matters as much as a finding (issue 5): laser recordings with no effect,
+    only EI +4 % and tip-sensor gain +1.5 % (within rigs.md §4's 5 % and 2 %), give empty
+    findings and no effect in the patch. Measured: training NRMSE 0.040 against the 0.035 the
+    rig's declared noise alone leaves, inside the 1.3x noise gate (diagnose.NOISE_MARGIN)."""
+    from watflex_sim.diagnose import NOISE_MARGIN, diagnose
+
+    recs = []
+    for i, (direction, payload) in enumerate((("positive", 0.7), ("negative", 0.7), ("positive", 1.15))):
+        scenario = load_scenario("laser_arm_step", [f"direction={direction}", f"payload_kg={payload}",
+                                                    "duration_s=1.2", "noise=true", f"seed={10 + i}"])
+        scenario["parameters"] = {"beam_EI": 1.04, "tip_sensor_gain": 1.015}
+        recs.append(simulate(scenario).recording)
+        recs[-1].meta["scenario"].pop("parameters")
+    report = diagnose(recs, ["pos", "neg", "pay"], workers=2, max_effects=1)
+    assert report["findings"] == [] and report["patch"]["effects"] == []
+    assert report["steps"][-1]["train_nrmse"] <= NOISE_MARGIN * report["noise_nrmse"]

@@ -45,7 +45,11 @@ def nrmse(measured: np.ndarray, simulated: np.ndarray) -> float:
 
 
 def correlation(measured: np.ndarray, simulated: np.ndarray) -> float:
-    """Pearson's correlation coefficient (laser_arm_paper eq. 26), NaN samples ignored."""
+    """Pearson's correlation coefficient (laser_arm_paper eq. 26), NaN samples ignored; NaN (no
+    warning) when either side is constant."""
     m, s = np.asarray(measured, float), np.asarray(simulated, float)
     ok = np.isfinite(m) & np.isfinite(s)
-    return float(np.corrcoef(m[ok], s[ok])[0, 1])
+    m, s = m[ok], s[ok]
+    if m.size < 2 or np.ptp(m) == 0 or np.ptp(s) == 0:
+        return np.nan
+    return float(np.corrcoef(m, s)[0, 1])
