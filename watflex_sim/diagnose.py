@@ -633,13 +633,14 @@ def fit_candidate(args) -> dict:
     base, cand, rig_columns, iters = args
     data = _DATA
     evaluate = evaluator(None)
-    values = step_search(evaluate, cand, base) if cand.quanta else cand.estimate
+    values = step_search(evaluate, cand, base)
     trial = cand.model(base, values)
     index = len(trial.effects) - 1
-    effect_slots = [Slot(("effect", index, n), s.low, s.high, s.log) for n, s in cand.slots.items() if n not in cand.quanta]
+    fitted_names = [n for n in cand.slots if n not in cand.quanta]  # a quantised one stays at its step
+    effect_slots = [Slot(("effect", index, n), cand.slots[n].low, cand.slots[n].high, cand.slots[n].log) for n in fitted_names]
     earlier = effect_slots_of(data, base)  # the effects found before are refit with it
     free = effect_slots + earlier + rig_slots(data)
-    x0 = [values[n] for n in cand.slots if n not in cand.quanta] + [_value(base, s) for s in earlier + rig_slots(data)]
+    x0 = [values[n] for n in fitted_names] + [_value(base, s) for s in earlier + rig_slots(data)]
     try:
         lo = np.array([s.to_internal(s.low) for s in free])
         u0 = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, [s.to_internal(s.high) for s in free])
@@ -944,10 +945,11 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             r["train_gain"] = (train_now - r["train"]["nrmse"]) / train_now
             r["held_gain"] = (held - r["held_out"]["nrmse"]) / held
             r["score"] = r["train_gain"] + r["held_gain"] - MIN_GAIN * r["n_params"]
+        fitted.sort(key=lambda r: -r["score"])
         fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
                                "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
-                               "score": round(r["score"], 4)} for r in sorted(fitted, key=lambda r: -r["score"])])
-        best = max(fitted, key=lambda r: r["score"])
+                               "score": round(r["score"], 4)} for r in fitted])
+        best = fitted[0]
         if best["train_gain"] < MIN_GAIN * best["n_params"] or best["held_gain"] < MIN_HELD_GAIN:
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"]})

@@ -20,7 +20,7 @@ from typing import Callable
 import mujoco
 
 from .model import ConfigError
-from .params import GRAVITY
+from .params import CONTROL_PERIOD, GRAVITY
 
 
 @dataclass
@@ -289,7 +289,7 @@ def sensor_offset(patch, where, offset):
 
 def delay(patch, where, seconds):
     """Transport delay (s, whole control periods) of the commands (where='command') or of a channel."""
-    ticks = max(0, int(round(seconds / 1e-3)))
+    ticks = max(0, int(round(seconds / CONTROL_PERIOD)))
     if where == "command":
         patch.command_delay = ticks
     else:
@@ -331,7 +331,7 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 1.5, 0.7, "command"),), "command"),
     "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95, neutral=1.0),), "channel"),
     "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel", 0.0),), "channel"),
-    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.001, neutral=0.0, wide=True, quantum=1e-3),), "command or channel"),
+    "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.001, neutral=0.0, wide=True, quantum=CONTROL_PERIOD),), "command or channel"),
     "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0, neutral=0.0),), "bearing geom"),
     "table_tilt": (table_tilt, (P("angle", "rad", -0.05, 0.05, 0.001, neutral=0.0),), "rig"),
 }
