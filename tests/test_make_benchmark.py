@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from watflex_sim import diagnose, read_recording
+from watflex_sim import diagnosis as diagnose, read_recording
 from watflex_sim.effects import CATALOGUE
 from watflex_sim.resim import resimulate
 from watflex_sim.rigdesc import load_rig

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from scipy.signal import savgol_filter  # noqa: E402
 
-from watflex_sim import diagnose  # noqa: E402
+from watflex_sim import diagnosis as diagnose  # noqa: E402
 from watflex_sim.params import LASER_ARM  # noqa: E402
 from watflex_sim.recording import Recording, read_recording  # noqa: E402
 
@@ -126,7 +126,7 @@ def sindy_residual(recordings: list[Recording], names: list[str], threshold: flo
     if sims is None:
         raise RuntimeError("the refit nominal model diverges on these recordings")
     rig = data.rig
-    motion = diagnose._motion_channel(recordings[0], rig)
+    motion = diagnose.motion_channel(recordings[0], rig)
     if motion is None:
         raise ValueError(f"no measured joint position of rig {rig.name} in the recordings: the library needs one")
     chans = [c for c in data.channels[0] if all(c in cs for cs in data.channels)]

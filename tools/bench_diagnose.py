@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from watflex_sim import load_scenario, simulate  # noqa: E402
-from watflex_sim.diagnose import diagnose  # noqa: E402
+from watflex_sim.diagnosis import diagnose  # noqa: E402
 from watflex_sim.resim import resimulate  # noqa: E402
 
 CASES = {

@@ -12,7 +12,7 @@ Recordings of the laser arm are simulated (noise on) with the two defects the pa
   the positive stop, so only a clockwise (positive) drive opens it [ours: the paper gives the
   0.17 mm, not where it is measured; we take it at the tip, where the asymmetry was seen].
 The recordings are what the paper's authors had: 2.5 mm tip steps, both directions, two of the
-paper's payloads (0.7 and 1.15 kg). `watflex_sim.diagnose.diagnose` sees only the recordings.
+paper's payloads (0.7 and 1.15 kg). `watflex_sim.diagnosis.diagnose` sees only the recordings.
 The tool writes DIR/recordings/*, DIR/report/ (as `watflex-sim diagnose`), prints the stages
 (nominal -> refit -> + each finding) with their NRMSE, and draws DIR/laser_demo.png: the tip
 sensor of a clockwise and an anticlockwise step, measured and simulated at each stage.
@@ -32,7 +32,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from watflex_sim import load_scenario, simulate, write_recording  # noqa: E402
-from watflex_sim.diagnose import diagnose  # noqa: E402
+from watflex_sim.diagnosis import diagnose  # noqa: E402
 from watflex_sim.params import LASER_ARM  # noqa: E402
 from watflex_sim.plot import save_figure  # noqa: E402
 from watflex_sim.recording import read_recording  # noqa: E402

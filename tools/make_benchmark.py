@@ -1,17 +1,23 @@
 """Generate a public benchmark of concealed effects for `watflex-sim diagnose`.
 
 Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,watflex]
-           [--per-effect 1] [--clean 3] [--effects a,b] [--duration 6]
+           [--per-effect 1] [--clean 3] [--hard 2] [--effects a,b] [--duration 6]
 
 A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
-rig with one catalogue effect added, in diagnosis order (the diagnosis holds out the LAST one):
+rig with one catalogue effect added, listed in a shuffled order (the diagnosis must not depend on it):
   laser_arm: 2.5 mm tip step positive, negative (0.7 kg), then a step at another paper payload;
   watflex (shoulder locked): elbow step +0.5 rad, -0.5 rad, then the 0.1 rad staircase.
 Each effect gets a place (`where`) the rig description allows, at random (Watflex: the places
 the elbow experiments excite: elbow-side ones, link 1 and its strain bridges 1A-1C, which the
 swinging elbow shakes), and a magnitude from RANGES: visible above the rig noise but modest.
 One concealment per case (CONCEALMENTS). `--clean` cases per rig have no effect, only the
-rig's parameters perturbed within their tolerances.
+rig's parameters perturbed within their tolerances. `--hard` cases per rig and kind (issue 14):
+  clean_rest: clean, but the last experiment is one in which nothing moves (an uninformative file);
+  out_of_tolerance: a rig parameter far outside its tolerance (the link's EI x0.25-0.4 or x2.5-4, or
+    a monitored sensor wired with the wrong sign): the right answer is the catalogue's closest effect
+    (link_stiffness_change, sensor_gain with a negative ratio);
+  outside_catalogue: physics the catalogue does not have (a monitored sensor with a cubic
+    nonlinearity, 30-60 % extra at its peak): the right answer is the verdict `unexplained`.
 
 Written: DIR/cases/<id>/<stem>.csv + .json (sidecars carry no effect, parameters or notes;
 case ids are opaque) and DIR/truth.json (the answers; schema in `make_cases`). DIR must not
@@ -128,6 +134,9 @@ SKIPPED = {  # (rig, effect) or (rig, effect, where): why no case is made
 DIRECTIONAL = {"coulomb_friction": ("torque_positive", "torque_negative"),
                "stribeck_friction": ("breakaway_positive", "breakaway_negative"),
                "viscous_friction": ("coefficient", "coefficient_negative")}
+HARD_KINDS = ("clean_rest", "out_of_tolerance", "outside_catalogue")
+MONITORED = {"laser_arm": "motor_current", "watflex": "strain_2B"}  # a sensor no controller reads
+STIFFNESS_PLACE = {"laser_arm": "beam", "watflex": "link2"}
 CONCEALMENTS = ("closed loop", "one direction only", "mixed with parameter error", "small against noise",
                 "indirect channel")
 NEUTRAL_NOTES = "benchmark recording"
@@ -163,8 +172,9 @@ def perturbed_parameters(rig: str, rng: np.random.Generator) -> dict[str, float]
             for name, p in load_rig(rig).parameters.items()}
 
 
-def experiments(rig: str, duration: float, rng: np.random.Generator) -> list[tuple[str, dict]]:
-    """The three recordings of a case as (stem, scenario without effects), the held-out one last."""
+def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: bool = False) -> list[tuple[str, dict]]:
+    """The three recordings of a case as (stem, scenario without effects); with `rest_last` the third is
+    an experiment in which nothing moves (laser: a zero step; Watflex: the sub-break-away triangle)."""
     if rig == "laser_arm":
         third = float(rng.choice([0.0, 1.15]))  # kg: a paper payload besides the 0.7 kg of the steps
         plan = [("step_positive", "positive", 0.7), ("step_negative", "negative", 0.7),
@@ -180,6 +190,13 @@ def experiments(rig: str, duration: float, rng: np.random.Generator) -> list[tup
         sc["direction"] = str(rng.choice(["positive", "negative"]))
         sc["reference"][0]["times_s"] = [round(duration * f, 3) for f in (0.2, 0.4, 0.6, 0.8)]  # s
         runs.append(("staircase", sc))
+    if rest_last:
+        if rig == "laser_arm":
+            sc = load_scenario("laser_arm_step") | {"payload_kg": 0.7}
+            sc["reference"]["arc_m"] = 0.0
+        else:
+            sc = load_scenario("watflex_elbow_triangle")
+        runs[-1] = ("at_rest", sc)
     for _, sc in runs:
         sc.update(duration_s=float(duration), noise=True, seed=int(rng.integers(2**31)))
     return runs
@@ -238,9 +255,12 @@ def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float) 
     `effect` None: a clean case (rig parameters perturbed within tolerance only)."""
     key = f"{rig}/{effect or 'clean'}/{k}"
     rng = _rng(seed, key)
-    truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, effect=effect, where=None,
+    kind = effect if effect in HARD_KINDS else ("clean" if effect is None else "effect")
+    truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, kind=kind, effect=effect, where=None,
                  parameters={}, units={}, refit_parameters={}, concealment=None, duration_s=float(duration))
-    runs = experiments(rig, duration, rng)
+    runs = experiments(rig, duration, rng, rest_last=kind == "clean_rest")
+    if kind in HARD_KINDS:
+        return make_hard_case(truth, rig, kind, runs, rng)
     if effect is None:
         truth["refit_parameters"] = perturbed_parameters(rig, rng)
         return truth, simulate_case(runs, [], truth["refit_parameters"])
@@ -270,12 +290,36 @@ def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float) 
     return None
 
 
+def make_hard_case(truth: dict, rig: str, kind: str, runs: list, rng: np.random.Generator) -> tuple[dict, list]:
+    """A case of HARD_KINDS (module docstring): its truth and recordings."""
+    refit = perturbed_parameters(rig, rng)
+    truth.update(effect=None, refit_parameters=refit, concealment=kind.replace("_", " "))
+    if kind == "clean_rest":
+        return truth, simulate_case(runs, [], refit)
+    if kind == "out_of_tolerance":
+        if rng.random() < 0.5:
+            ratio = float(f"{rng.uniform(2.5, 4.0) if rng.random() < 0.5 else rng.uniform(0.25, 0.4):.4g}")
+            effect = dict(effect="link_stiffness_change", where=STIFFNESS_PLACE[rig], ratio=ratio)
+        else:
+            effect = dict(effect="sensor_gain", where=MONITORED[rig], ratio=-1.0)
+        truth.update(effect=effect["effect"], where=effect["where"], parameters={"ratio": effect["ratio"]},
+                     units={"ratio": "-"})
+        return truth, simulate_case(runs, [effect], refit)
+    channel, extra = MONITORED[rig], float(f"{rng.uniform(0.3, 0.6):.3g}")
+    recordings = simulate_case(runs, [], refit)
+    for _, rec in recordings:  # y = x (1 + extra (x / peak)^2): +extra at the channel's peak
+        x = rec.channels[channel]
+        rec.channels[channel] = x * (1 + extra * (x / np.nanmax(np.abs(x))) ** 2)
+    truth.update(where=channel, parameters={"cubic_extra_at_peak": extra}, units={"cubic_extra_at_peak": "-"})
+    return truth, recordings
+
+
 def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
-               duration: float = 6.0, log=lambda line: print(line, flush=True)) -> dict:
+               duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0) -> dict:
     """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
 
-    truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "recordings" (paths relative
-    to `out`, diagnosis order: the last is held out), "effect" | null, "where" | null, "parameters",
+    truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean or one of
+    HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
     "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s"}],
     "skipped": [{"rig", "effect", "why"}]}. `effects` None: the whole catalogue.
     """
@@ -292,6 +336,7 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
             else:
                 plan += [(rig, effect, k) for k in range(per_effect)]
         plan += [(rig, None, k) for k in range(clean)]
+        plan += [(rig, kind, k) for kind in HARD_KINDS for k in range(hard)]
     cases = []
     for n, (rig, effect, k) in enumerate(plan, 1):
         start = time.perf_counter()
@@ -302,12 +347,13 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
         truth, recordings = made
         directory = out / "cases" / truth["id"]
         paths = [write_recording(rec, directory, stem) for stem, rec in recordings]
-        truth["recordings"] = [p.relative_to(out).as_posix() for p in paths]
+        order = _rng(seed, f"order/{truth['id']}").permutation(len(paths))  # the diagnosis must not depend on it
+        truth["recordings"] = [paths[i].relative_to(out).as_posix() for i in order]
         cases.append(truth)
         log(f"[{n}/{len(plan)}] {truth['id']}: {effect or 'clean'}"
             f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
             f"{time.perf_counter() - start:.1f} s")
-    order = ("id", "rig", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
+    order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
              "concealment", "duration_s")
     truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
              "cases": [{k: c[k] for k in order} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped}
@@ -326,6 +372,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rigs", default=",".join(RIGS), metavar="LIST", help=f"comma-separated rigs (default {','.join(RIGS)})")
     parser.add_argument("--per-effect", type=int, default=1, metavar="N", help="cases per effect and rig (default 1)")
     parser.add_argument("--clean", type=int, default=3, metavar="N", help="clean cases per rig: no effect (default 3)")
+    parser.add_argument("--hard", type=int, default=0, metavar="N",
+                        help=f"cases per rig of each hard kind ({', '.join(HARD_KINDS)}; default 0)")
     parser.add_argument("--effects", default="", metavar="LIST", help="comma-separated catalogue effects (default: all)")
     parser.add_argument("--duration", type=float, default=6.0, metavar="S", help="length of each recording, s (default 6)")
     args = parser.parse_args(argv)
@@ -336,13 +384,13 @@ def main(argv=None) -> int:
     if effects and set(effects) - set(CATALOGUE):
         parser.error(f"unknown effect(s) {', '.join(sorted(set(effects) - set(CATALOGUE)))} "
                      f"(catalogue: {', '.join(CATALOGUE)})")
-    if args.per_effect < 0 or args.clean < 0:
-        parser.error("--per-effect and --clean must be >= 0")
+    if args.per_effect < 0 or args.clean < 0 or args.hard < 0:
+        parser.error("--per-effect, --clean and --hard must be >= 0")
     if not 0.2 <= args.duration <= 600:
         parser.error(f"--duration must be within 0.2 .. 600 s (the laser step is at 0.1 s), got {args.duration:g}")
     start = time.perf_counter()
     try:
-        truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration)
+        truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard)
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     for s in truth["skipped"]:

@@ -2,14 +2,17 @@
 
     python tools/score_benchmark.py BENCH_DIR [--cases PATTERN] [--no-baselines] [--workers 2]
 
-For every case it runs `watflex_sim.diagnose.diagnose` on the case's recordings only (the truth
+For every case it runs `watflex_sim.diagnosis.diagnose` on the case's recordings only (the truth
 in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-only and
 (b) SINDy on the residual (tools/baselines.py). It prints and writes BENCH_DIR/score.md:
 
 - per case: truth, what each method names first, parameter error, held-out NRMSE, time;
 - a confusion table (true effect -> effect named first, ours);
-- the summary: top-1 effect accuracy, location accuracy, "none" specificity, median parameter
-  error, median held-out NRMSE ratio after/before, time per case.
+- the summary: top-1 effect accuracy (effect and out-of-tolerance cases), location accuracy,
+  "nothing missing" specificity (clean cases, with or without an uninformative last file),
+  `unexplained` recall (physics outside the catalogue), median parameter error, 95 % interval
+  coverage (share of true parameter values inside the finding's interval), the verdicts, how often
+  an experiment was proposed, median validation NRMSE ratio after/before, time per case.
 
 Parameter error of a finding that names the right effect: for each true parameter,
 |found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
@@ -30,7 +33,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from watflex_sim.diagnose import diagnose  # noqa: E402
+from watflex_sim.diagnosis import diagnose  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
 from watflex_sim.model import ConfigError  # noqa: E402
 from watflex_sim.recording import read_recording  # noqa: E402
@@ -57,19 +60,27 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     report = diagnose(recordings, names, workers=workers)
     seconds = time.perf_counter() - start
     first = report["findings"][0] if report["findings"] else None
+    kind = case.get("kind", "clean" if case["effect"] is None else "effect")
     truth_effect = case["effect"] or NONE
+    if kind == "outside_catalogue":
+        truth_effect = "unexplained"
     row = {
-        "id": case["id"], "rig": case["rig"], "truth": truth_effect, "where": case.get("where"),
-        "concealment": case.get("concealment", ""),
+        "id": case["id"], "rig": case["rig"], "kind": kind, "truth": truth_effect, "where": case.get("where"),
+        "concealment": case.get("concealment", ""), "verdict": report.get("verdict"),
+        "proposed": bool(report.get("proposed_experiment")), "covered": [],
         "ours": first["effect"] if first else NONE, "ours_where": first["where"] if first else None,
         "ours_all": [f["effect"] for f in report["findings"]],
         "held_before": report["held_out"]["before"]["nrmse"], "held_after": report["held_out"]["after"]["nrmse"],
         "seconds": seconds, "error": None,
     }
-    if first and truth_effect != NONE:  # the true effect anywhere among the findings counts for the error
+    if kind == "outside_catalogue":
+        row["ours"] = "unexplained" if report.get("verdict") == "unexplained" else row["ours"]
+    if first and truth_effect in CATALOGUE:  # the true effect anywhere among the findings counts for the error
         match = next((f for f in report["findings"] if f["effect"] == truth_effect), None)
         if match:
             row["error"] = parameter_error(truth_effect, case["parameters"], match["parameters"])
+            row["covered"] = [lo <= case["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
+                              if k in case["parameters"]]
     if baselines:
         from baselines import refit_only, sindy_residual
 
@@ -108,15 +119,23 @@ def summary(rows: list[dict], baselines: bool) -> str:
     lines += ["", "| true effect | named first by the diagnosis (count) |", "|---|---|"]
     for truth in sorted(confusion):
         lines.append(f"| {truth} | " + ", ".join(f"{k} {v}" for k, v in confusion[truth].most_common()) + " |")
-    effect_rows = [r for r in rows if r["truth"] != NONE]
+    effect_rows = [r for r in rows if r["truth"] in CATALOGUE]
     clean = [r for r in rows if r["truth"] == NONE]
+    outside = [r for r in rows if r["truth"] == "unexplained"]
     errors = [r["error"] for r in effect_rows if r["error"] is not None]
+    covered = [c for r in rows for c in r.get("covered", [])]
+    verdicts = Counter(f"{r.get('kind', '?')}: {r.get('verdict')}" for r in rows)
     ratios = [r["held_after"] / r["held_before"] for r in rows if r["held_before"] > 0]
     times = [r["seconds"] for r in rows]
     figures = [
         ("top-1 effect accuracy (target >= 90 %)", _pct(sum(r["ours"] == r["truth"] for r in effect_rows), len(effect_rows))),
         ("location accuracy (first finding at the true place)", _pct(sum(r["ours_where"] == r["where"] for r in effect_rows), len(effect_rows))),
-        ('"none" specificity on clean cases (target >= 90 %)', _pct(sum(r["ours"] == NONE for r in clean), len(clean))),
+        ('"nothing missing" specificity on clean cases (target >= 90 %)',
+         _pct(sum(r["ours"] == NONE and r.get("verdict", "nothing_missing") == "nothing_missing" for r in clean), len(clean))),
+        ("`unexplained` recall, physics outside the catalogue (target >= 80 %)", _pct(sum(r["ours"] == "unexplained" for r in outside), len(outside))),
+        ("95 % intervals covering the true value (target >= 80 %)", _pct(sum(covered), len(covered))),
+        ("verdicts by kind of case", ", ".join(f"{k} {v}" for k, v in sorted(verdicts.items()))),
+        ("experiment proposed (alternatives within noise)", _pct(sum(r.get("proposed", False) for r in rows), len(rows))),
         ("median parameter error, right effect (target <= 15 %)", f"{100 * statistics.median(errors):.1f} % (n={len(errors)})" if errors else "-"),
         ("median held-out NRMSE after / before", f"{statistics.median(ratios):.3f}" if ratios else "-"),
         ("time per case: median / max (s)", f"{statistics.median(times):.0f} / {max(times):.0f}" if times else "-"),
@@ -163,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         rows.append(row)
         elapsed = time.perf_counter() - start
-        print(f"[{i}/{len(cases)}] {case['id']}: truth {row['truth']}, ours {row['ours']}"
+        print(f"[{i}/{len(cases)}] {case['id']}: truth {row['truth']}, ours {row['ours']} ({row['verdict']})"
               + (f", SINDy {row['sindy']}" if "sindy" in row else "")
               + f" ({row['seconds']:.0f} s; ETA {elapsed / i * (len(cases) - i) / 60:.1f} min)", file=sys.stderr, flush=True)
     table = summary(rows, not args.no_baselines)

@@ -163,7 +163,7 @@ def cmd_plot(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
-    from .diagnose import diagnose
+    from .diagnosis import diagnose
     from .report import summary, write_report
     from .rigdesc import load_rig
 

@@ -324,12 +324,12 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "backlash": (backlash, (P("width", "rad", 1e-5, 0.5, 0.15, "motion", log=True), P("position", "-", -1.0, 1.0, 0.0)), "joint"),
     "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),
     "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),
-    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0, wide=True),), "link"),
+    "link_stiffness_change": (link_stiffness_change, (P("ratio", "-", 0.02, 1000.0, 0.9, neutral=1.0, log=True, wide=True),), "link"),  # a cracked link to a rigid one
     "structural_damping": (structural_damping, (P("ratio", "-", 0.5, 30.0, 2.0, neutral=1.0, wide=True),), "link"),
-    "actuator_gain": (actuator_gain, (P("ratio", "-", 0.3, 2.0, 0.9, neutral=1.0),), "command"),
+    "actuator_gain": (actuator_gain, (P("ratio", "-", 0.1, 5.0, 0.9, neutral=1.0),), "command"),
     "actuator_offset": (actuator_offset, (P("offset", "command unit", -0.5, 0.5, 0.02, "command", 0.0),), "command"),
     "current_saturation": (current_saturation, (P("limit", "command unit", 0.1, 1.5, 0.7, "command"),), "command"),
-    "sensor_gain": (sensor_gain, (P("ratio", "-", 0.3, 2.0, 0.95, neutral=1.0),), "channel"),
+    "sensor_gain": (sensor_gain, (P("ratio", "-", -2.0, 2.0, 0.95, neutral=1.0),), "channel"),  # negative: a wiring sign error
     "sensor_offset": (sensor_offset, (P("offset", "channel unit", -0.5, 0.5, 0.02, "channel", 0.0),), "channel"),
     "delay": (delay, (P("seconds", "s", 0.0, 0.05, 0.001, neutral=0.0, wide=True, quantum=CONTROL_PERIOD),), "command or channel"),
     "bearing_friction": (bearing_friction, (P("force", "N", 0.0, 50.0, 1.0, neutral=0.0),), "bearing geom"),

@@ -92,6 +92,17 @@ def write_report(report: dict, recordings: list[Recording], directory: Path, rrd
                 units[f"{c}.{label}"] = unit_of.get(c, "")
         log_run(time, channels, units, rrd_path=directory / "diagnosis.rrd", recording_name=f"diagnosis {report['recordings'][0]}")
         out["rrd"] = "diagnosis.rrd"
+    proposal = out.get("proposed_experiment")
+    if proposal and proposal.get("scenario_dict"):
+        from .diagnosis.experiment import to_toml
+
+        scenario = proposal.pop("scenario_dict")
+        comment = (f"Proposed by `watflex-sim diagnose`: the experiment that best separates {', '.join(proposal['separates'])}.\n"
+                   f"Predicted difference: {proposal['expected_difference']}.\nRun it on the rig (the reference below), "
+                   "or simulate it: watflex-sim run THIS_FILE --out DIR")
+        _atomic_write(directory / "discriminate.toml", to_toml(scenario, comment))
+        proposal["scenario"] = str(directory / "discriminate.toml")
+        out["proposed_experiment"] = proposal
     spec = patched_spec(report["rig"], report["patch"])
     _atomic_write(directory / "patched_model.xml", spec.to_xml())
     _atomic_write(directory / "patch.json", json.dumps(report["patch"], indent=2) + "\n")
@@ -111,17 +122,31 @@ def summary(report: dict) -> str:
                      f"({w['regime']}), {w['score']:.2f} of its spread")
     if report["refit_parameters"]:
         lines.append("refit within tolerance: " + ", ".join(f"{k} x{v:.4f}" for k, v in report["refit_parameters"].items()))
-    if not report["findings"]:
-        lines.append("findings: nothing missing - the nominal model, refit within its tolerances, explains the data to within its noise")
+    lines.append(f"verdict: {report['verdict'].replace('_', ' ')} - {report['verdict_reason']}")
     for i, f in enumerate(report["findings"], 1):
         lines.append(f"finding {i}: {f['effect']} at {f['where']} ({f['direction']}): {f['explanation']}")
+        for k, (lo, hi) in f.get("intervals", {}).items():
+            lines.append(f"  {k}: {f['parameters'][k]:.4g} {f['units'].get(k, '')}, 95 % interval [{lo:.4g}, {hi:.4g}]")
         lines.append(f"  evidence: {f['evidence']}")
+    for a in report.get("alternatives", []):
+        lines.append(f"alternative to {a['instead_of']}: {a['effect']} at {a['where']} - {a['why_not_chosen']}")
+    proposal = report.get("proposed_experiment")
+    if proposal and proposal.get("scenario"):
+        lines.append(f"experiment that would decide: {proposal['experiment']} ({proposal['expected_difference']}); "
+                     f"scenario {proposal['scenario']}")
+    if report["verdict"] == "unexplained":
+        for w in report["residual"]["where"][:3]:
+            lines.append(f"  residual left: {w['channel']} in {w['recording']} {w['t_start']:.2f}-{w['t_end']:.2f} s "
+                         f"({w['regime']}), {w['noise_ratio']:.1f} x its noise, dominant {w['frequency_hz']:.1f} Hz")
+        for b in report["residual"]["parameters_at_bounds"]:
+            lines.append(f"  at its tolerance bound: {b['parameter']} x{b['ratio']:.4f} (tolerance +-{100 * b['tolerance']:.0f} %)")
     for r in report.get("rejected", []):
         if r.get("train_gain", 0) > 0 and r.get("held_out_gain", 0) > 0:
             lines.append(f"below the bar: {r['effect']} at {r['where']} improves training by {100 * r['train_gain']:.1f} % "
                          f"and held-out by {100 * r['held_out_gain']:.1f} %, less than its parameters' cost")
     ho = report["held_out"]
-    lines.append(f"held-out NRMSE {ho['before']['nrmse']:.4f} -> {ho['after']['nrmse']:.4f} ({ho['how']})")
+    lines.append(f"validation NRMSE {ho['before']['nrmse']:.4f} -> {ho['after']['nrmse']:.4f}, "
+                 f"{ho['before']['noise_ratio']:.2f} -> {ho['after']['noise_ratio']:.2f} x the noise ({ho['how']})")
     lines.append(f"all data: NRMSE {report['fit_before']['nrmse']:.4f} -> {report['fit_after']['nrmse']:.4f}, "
                  f"correlation {report['fit_before']['correlation']:.4f} -> {report['fit_after']['correlation']:.4f}")
     if report.get("timing"):

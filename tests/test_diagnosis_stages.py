@@ -1,0 +1,120 @@
+"""The diagnosis' stages alone (issue 14), on inputs whose answer is known in closed form."""
+import math
+
+import numpy as np
+import pytest
+
+from watflex_sim import load_scenario, simulate
+from watflex_sim.diagnosis import Model, Slot, intervals, prepare
+from watflex_sim.diagnosis.data import measured_noise, split_blocks
+from watflex_sim.diagnosis.explain import direction, physical_place, units_at
+from watflex_sim.diagnosis.pipeline import explained_share, fold_within_tolerance
+
+
+@pytest.fixture(scope="module")
+def laser_recordings():
+    recs = []
+    for i, direction_ in enumerate(("positive", "negative")):
+        scenario = load_scenario("laser_arm_step", [f"direction={direction_}", "duration_s=0.4", f"seed={i}"])
+        recs.append(simulate(scenario).recording)
+    return recs
+
+
+def test_prepare_is_the_same_whatever_the_file_order(laser_recordings):
+    """Canonical order (by name, then content): the split, channels and noise do not depend on
+    the order the files were given in."""
+    a = prepare(laser_recordings, ["b.csv", "a.csv"])
+    b = prepare(laser_recordings[::-1], ["a.csv", "b.csv"])
+    assert a.names == b.names == ["a.csv", "b.csv"]
+    assert all(np.array_equal(x, y) for x, y in zip(a.train, b.train))
+    assert a.noise == b.noise and a.channels == b.channels
+
+
+def test_every_recording_is_both_fitted_and_validated(laser_recordings):
+    """Alternate blocks in every recording (not a held-out file): about half of each recording's
+    samples train, the other half validate, and blocks are at most 0.25 s."""
+    data = prepare(laser_recordings, ["a", "b"])
+    for mask in data.train:
+        assert 0.4 < mask.mean() < 0.6
+    mask, block = split_blocks(np.arange(0, 6.0, 1e-3))
+    assert block == pytest.approx(0.1, rel=1e-3) and mask[:100].all() and not mask[100:200].any()
+
+
+def test_noise_is_measured_from_the_data():
+    """White noise of rms 0.01 on a slow sine: the second-difference estimate gives 0.01 within 5 %;
+    a quantised ramp (step 1e-3) gives at least the uniform quantisation rms 1e-3/sqrt(12)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 5, 1e-3)
+    assert measured_noise(np.sin(2 * np.pi * t) + 0.01 * rng.normal(size=t.size)) == pytest.approx(0.01, rel=0.05)
+    assert measured_noise(np.round(0.1 * t / 1e-3) * 1e-3) >= 1e-3 / math.sqrt(12) * 0.999
+
+
+def test_intervals_cover_a_linear_fit_as_often_as_they_say():
+    """y = a t + white noise, fitted by least squares: the 95 % interval from the Jacobian covers
+    the true a in 95 % +- 4 % of 400 seeds (binomial: 2 sd = 2.2 %)."""
+    t = np.linspace(0, 1, 200)
+    J = t[:, None]
+    covered = 0
+    for seed in range(400):
+        y = 2.0 * t + 0.1 * np.random.default_rng(seed).normal(size=t.size)
+        a = float(J[:, 0] @ y / (J[:, 0] @ J[:, 0]))
+        r = a * t - y
+        lo, hi = intervals([Slot(("param", "a"), -10, 10)], Model(parameters={"a": a}), J, r)[0]
+        covered += lo <= 2.0 <= hi
+    assert covered / 400 == pytest.approx(0.95, abs=0.04)
+
+
+def test_direction_follows_the_final_parameters():
+    """A level per direction that is ~0 one way is one-sided; equal levels are 'both' (issue 14's
+    stale label: 'both' with torque_positive 1e-28)."""
+    assert direction("coulomb_friction", {"torque_positive": 1e-28, "torque_negative": 0.3}) == "negative"
+    assert direction("coulomb_friction", {"torque_positive": 0.5, "torque_negative": 0.48}) == "both"
+    assert direction("backlash", {"width": 1e-3, "position": 0.9}) == "positive"
+
+
+def test_places_and_units_are_the_rigs_own(laser_recordings):
+    """A delay on 'command' acts on the command channel the recordings carry; a command limit is in
+    the channel's unit (V); friction on a slide is in N (EMPS), on a hinge in N m."""
+    data = prepare(laser_recordings, ["a", "b"])
+    assert physical_place(data, "delay", "command") == "voltage_cmd"
+    assert units_at(data, "current_saturation", "voltage_cmd") == {"limit": "V"}
+    assert units_at(data, "coulomb_friction", "hub")["torque_positive"] == "N m"
+
+
+def test_a_gain_within_tolerance_is_parameter_error_not_physics(laser_recordings):
+    """sensor_gain 1.015 on the tip sensor (tolerance 2 %, rigs.md §4) goes into the refit parameters;
+    0.5 (a halved gain) stays a finding; a negative ratio (a sign error) too."""
+    data = prepare(laser_recordings, ["a", "b"])
+    folded = fold_within_tolerance(data, Model([dict(effect="sensor_gain", where="tip_sensor", ratio=1.015)], {}))
+    assert folded.effects == [] and folded.parameters["tip_sensor_gain"] == pytest.approx(1.015)
+    for ratio in (0.5, -1.0):
+        kept = fold_within_tolerance(data, Model([dict(effect="sensor_gain", where="tip_sensor", ratio=ratio)], {}))
+        assert len(kept.effects) == 1
+
+
+def test_explained_share():
+    """Share of the residual above the noise removed: 25 x -> 2 x the noise removes 24/25 = 96 %... of 24."""
+    assert explained_share(25.0, 2.0) == pytest.approx(23 / 24)
+    assert explained_share(0.9, 0.9) == 1.0
+
+
+def test_proposed_experiment_separates_two_explanations_and_runs(laser_recordings, tmp_path):
+    """Two explanations that differ (0.3 N m Coulomb vs 0.3 N m Stribeck excess decaying at 0.01
+    rad/s): the proposal is a menu experiment of these recordings whose predictions differ by more
+    than the noise, written as a scenario file that `watflex-sim run` accepts."""
+    from watflex_sim.cli import main
+    from watflex_sim.diagnosis.experiment import propose_experiment, to_toml
+    from watflex_sim.diagnosis.runner import hold
+
+    data = prepare(laser_recordings, ["a", "b"])
+    hold(data)
+    chosen = Model([dict(effect="coulomb_friction", where="hub", torque_positive=0.3, torque_negative=0.3)])
+    other = dict(effect="stribeck_friction", where="hub", instead_of="coulomb_friction",
+                 model={"effects": [dict(effect="stribeck_friction", where="hub", breakaway_positive=0.3,
+                                         breakaway_negative=0.3, v_s=0.01)], "parameters": {}})
+    proposal = propose_experiment(data, chosen, [other])
+    assert proposal["scenario_dict"] is not None and proposal["experiment"].split()[0] in ("a", "b")
+    assert float(proposal["expected_difference"].split(": ")[1].split(" x")[0]) > 1.0
+    path = tmp_path / "discriminate.toml"
+    path.write_text(to_toml(proposal["scenario_dict"], "proposed"))
+    assert main(["run", str(path), "--out", str(tmp_path / "run"), "--no-plot", "--no-rrd"]) == 0

@@ -1,0 +1,235 @@
+"""The diagnosis' data: recordings of one rig in a canonical order, the channels compared, their
+spreads and noise levels, and the training/validation split.
+
+Contract: `prepare(recordings, names)` returns the same `Data` whatever order the files come in
+(they are sorted by name, then content). Every recording is split into alternate time blocks:
+even blocks train the fits, odd blocks validate them, so every regime the data has (directions,
+payloads, rest, saturation, reversals) is judged on samples the fit did not see. Residuals are in
+two units: the channel's spread (what fits minimise, `residual_vector`) and the channel's noise
+(what verdicts judge, `noise_ratio`: 1 = the model is as close as the noise allows).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..metrics import correlation, nrmse
+from ..model import ConfigError
+from ..recording import Recording
+from ..rigdesc import RigDescription, load_rig
+
+FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
+BLOCKS_PER_RECORDING = 60  # alternate blocks per recording (train, validate, train, ...): short enough that a transient is split
+BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
+STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
+
+
+@dataclass
+class Model:
+    """A candidate model: effects (catalogue entries with parameters) and refit parameter ratios."""
+
+    effects: list[dict] = field(default_factory=list)
+    parameters: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Data:
+    """The recordings of one rig (canonical order), the channels compared, their scales, their
+    noise and the train/validation split."""
+
+    recordings: list[Recording]
+    names: list[str]
+    rig: RigDescription
+    channels: list[list[str]]  # per recording
+    scale: list[dict[str, float]]  # per recording: channel -> RMS spread (its unit)
+    noise: list[dict[str, float]]  # per recording: channel -> noise rms (its unit)
+    train: list[np.ndarray]  # per recording: boolean mask of training samples
+    how: str = ""
+
+    @property
+    def noise_floor(self) -> list[dict[str, float]]:
+        """Per recording: channel -> the NRMSE that noise alone leaves (noise / spread)."""
+        return [{c: n[c] / s[c] for c in n} for n, s in zip(self.noise, self.scale)]
+
+
+def _fingerprint(rec: Recording) -> str:
+    h = hashlib.sha256(np.ascontiguousarray(rec.time).tobytes())
+    for c in sorted(rec.channels):
+        h.update(c.encode())
+        h.update(np.ascontiguousarray(rec.channels[c]).tobytes())
+    return h.hexdigest()
+
+
+def measured_noise(values: np.ndarray) -> float:
+    """Noise rms estimated from the data itself (its unit): the median absolute second difference
+    of consecutive samples (white noise: rms x sqrt(6) x 0.6745), at least the rms of a uniform
+    quantisation step when the values are quantised. Smooth motion sampled fast contributes
+    little (a sinusoid's second difference is (w dt)^2 of it)."""
+    x = values[np.isfinite(values)]
+    if x.size < 5:
+        return 0.0
+    d2 = np.diff(x, 2)
+    sigma = float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / math.sqrt(6)
+    levels = np.unique(x)
+    if 1 < levels.size < 0.5 * x.size:  # quantised: an encoder, a converter
+        sigma = max(sigma, float(np.median(np.diff(levels))) / math.sqrt(12))
+    return sigma
+
+
+def split_blocks(time: np.ndarray) -> tuple[np.ndarray, float]:
+    """Training mask of one recording (alternate blocks, the first one training, only within
+    FIT_SECONDS) and the block length (s)."""
+    t = time - time[0]
+    block = float(np.clip(t[-1] / BLOCKS_PER_RECORDING, *BLOCK_LIMITS_S))
+    return ((t // block) % 2 == 0) & (t < FIT_SECONDS), block
+
+
+def prepare(recordings: list[Recording], names: list[str]) -> Data:
+    """Check the recordings share one rig and have comparable channels; order them canonically;
+    split each into training and validation blocks; take each channel's spread and noise."""
+    rigs = {r.rig for r in recordings}
+    if len(rigs) != 1:
+        raise ConfigError(f"recordings of different rigs in one diagnosis: {', '.join(sorted(rigs))}")
+    rig = load_rig(rigs.pop())
+    order = sorted(range(len(recordings)), key=lambda i: (names[i], _fingerprint(recordings[i])))
+    recordings, names = [recordings[i] for i in order], [names[i] for i in order]
+    outputs = set(rig.of_kind("measured"))
+    channels, scale, noise, train, blocks = [], [], [], [], []
+    for rec, name in zip(recordings, names):
+        if rec.time[-1] - rec.time[0] < 0.05:
+            raise ConfigError(f"{name}: recording shorter than 50 ms, too short to simulate")
+        closed = rec.meta.get("mode", "closed_loop") != "open_loop"
+        wanted = outputs | (set(rig.of_kind("command")) if closed else set())
+        chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
+                 and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
+        if not chans:
+            raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
+        spread = {c: float(np.nanstd(rec.channels[c])) or 1.0 for c in chans}
+        declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
+        channels.append(chans)
+        scale.append(spread)
+        noise.append({c: max(declared[c], measured_noise(rec.channels[c])) or 1e-3 * spread[c] for c in chans})
+        mask, block = split_blocks(rec.time)
+        train.append(mask)
+        blocks.append(block)
+    longer = any(r.time[-1] - r.time[0] > FIT_SECONDS for r in recordings)
+    how = (f"every recording in alternate blocks of {min(blocks):.2g}-{max(blocks):.2g} s: even blocks fitted, "
+           f"odd blocks validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
+           + "; the same regimes in both, whatever the file order")
+    return Data(recordings, names, rig, channels, scale, noise, train, how)
+
+
+def in_part(train: np.ndarray, part: str) -> np.ndarray:
+    """Sample mask of a part: 'train', 'held_out' (validation) or 'all'."""
+    return {"train": train, "held_out": ~train, "all": np.ones_like(train)}[part]
+
+
+def residual_vector(data: Data, sims: list[Recording], part: str = "train", stride: int = STRIDE,
+                    only: int | None = None) -> np.ndarray:
+    """(simulated - measured) / spread over a part, every `stride` samples (what fits minimise)."""
+    pieces = []
+    for i, (rec, sim, chans, scale, train) in enumerate(zip(data.recordings, sims, data.channels, data.scale, data.train)):
+        mask = in_part(train, part)
+        if not mask.any() or (only is not None and i != only):
+            continue
+        idx = np.flatnonzero(mask)[::stride]
+        for c in chans:
+            r = (sim.channels[c][idx] - rec.channels[c][idx]) / scale[c]
+            pieces.append(np.where(np.isfinite(r), r, 0.0))
+    return np.concatenate(pieces) if pieces else np.zeros(0 if only is not None else 1)
+
+
+def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list[dict]:
+    """Per recording and channel: RMS residual / noise rms on a part (1 = within the noise)."""
+    out = []
+    for rec, sim, name, chans, noise, train in zip(data.recordings, sims, data.names, data.channels, data.noise, data.train):
+        mask = in_part(train, part)
+        for c in chans:
+            r = (sim.channels[c] - rec.channels[c])[mask]
+            r = r[np.isfinite(r)]
+            if r.size >= 10:
+                out.append({"recording": name, "channel": c, "ratio": float(np.sqrt(np.mean(r**2))) / noise[c]})
+    return out
+
+
+def noise_ratio(data: Data, sims: list[Recording] | None, part: str = "all") -> float:
+    """Mean over recordings and channels of RMS residual / noise on a part: what the verdicts judge
+    (1 = the model is as close as the noise allows); inf if the model diverged."""
+    if sims is None:
+        return math.inf
+    ratios = [r["ratio"] for r in channel_ratios(data, sims, part)]
+    return float(np.mean(ratios)) if ratios else 0.0
+
+
+def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> dict:
+    """Mean NRMSE and correlation over channels and recordings (recordings.md), and the noise ratio,
+    on a part."""
+    if sims is None:
+        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf}
+    errors, corrs = [], []
+    for rec, sim, chans, train in zip(data.recordings, sims, data.channels, data.train):
+        mask = in_part(train, part)
+        if mask.sum() < 10:
+            continue
+        for c in chans:
+            errors.append(nrmse(rec.channels[c][mask], sim.channels[c][mask]))
+            corrs.append(correlation(rec.channels[c][mask], sim.channels[c][mask]))
+    return {"nrmse": float(np.nanmean(errors)), "correlation": float(np.nanmean(corrs)),
+            "noise_ratio": noise_ratio(data, sims, part)}
+
+
+def noise_cost(data: Data) -> float:
+    """Expected squared training residual (residual_vector) that measurement noise alone leaves."""
+    return float(sum(len(np.flatnonzero(t)[::STRIDE]) * sum(f[c] ** 2 for c in chans)
+                     for t, chans, f in zip(data.train, data.channels, data.noise_floor)))
+
+
+def noise_nrmse(data: Data, part: str = "all") -> float:
+    """Mean NRMSE that measurement noise alone leaves on a part, averaged like fit_scores."""
+    floors = [v for floor, train in zip(data.noise_floor, data.train) if in_part(train, part).sum() >= 10
+              for v in floor.values()]
+    return float(np.mean(floors)) if floors else 0.0
+
+
+def peak(x: np.ndarray) -> float:
+    """Robust peak |x| (99.5th percentile, NaN ignored): what a signal reaches, not its outliers."""
+    x = np.abs(x[np.isfinite(x)])
+    return float(np.percentile(x, 99.5)) if x.size else 0.0
+
+
+def motion_channel(rec: Recording, rig: RigDescription) -> str | None:
+    """The measured joint position (rad or m) that moves most in the recording: what 'motion' means."""
+    positions = [c for c in rig.of_kind("measured") if c in rec.channels
+                 and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")]
+    return max(positions, key=lambda c: float(np.nanstd(rec.channels[c])), default=None)
+
+
+def scale_of(data: Data, param, where: str) -> float:
+    """The size a scaled catalogue parameter is measured in (effects.Param.scale), from the data:
+    "effort" the peak actuator force or torque, "effort/speed" that over the peak speed,
+    "command" the peak of command channel `where`, "channel" the spread of channel `where`,
+    "motion" the range of the motion channel."""
+    if not param.scale:
+        return 1.0
+    efforts, speeds, values, ranges = [], [], [], []
+    for rec in data.recordings:
+        for c in data.rig.of_kind("command"):
+            if c in rec.channels:
+                efforts.append(peak(rec.channels[c]) * data.rig.channels[c].get("gain", 1.0))
+        motion = motion_channel(rec, data.rig)
+        if motion:
+            speeds.append(peak(np.gradient(rec.channels[motion], rec.time)))
+            ranges.append(float(np.nanmax(rec.channels[motion]) - np.nanmin(rec.channels[motion])))
+        if where in rec.channels:
+            values.append(peak(rec.channels[where]) if param.scale == "command" else float(np.nanstd(rec.channels[where])))
+    effort = max(efforts, default=1.0) or 1.0
+    if param.scale == "motion":
+        return max(ranges, default=1.0) or 1.0
+    if param.scale == "effort":
+        return effort
+    if param.scale == "effort/speed":
+        return effort / (max(speeds, default=1.0) or 1.0)
+    return max(values, default=1.0) or 1.0

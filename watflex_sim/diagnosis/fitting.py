@@ -1,0 +1,181 @@
+"""Fitting: bounded Levenberg-Marquardt on the training residual, and 95 % intervals.
+
+Contract: a fitted number is a `Slot` (where it goes in a `Model`, bounds, linear or log). `levenberg`
+takes a function models -> residual vectors (None where a model diverges) and returns the model
+with the lowest training cost it found; each iteration costs one simulation of the training data
+(the Jacobian is kept current by Broyden updates). `intervals` turns a Jacobian at the solution into
+95 % intervals in physical units, widened for the residual's serial correlation.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..engine import SimulationError
+from .data import Data, Model, noise_cost
+from .runner import evaluator, hold
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Slot:
+    """One fitted number: where it goes in a Model, its bounds and whether it is fitted in log."""
+
+    where: tuple  # ("param", name) or ("effect", index, name | tuple of names tied together)
+    low: float
+    high: float
+    log: bool = False
+
+    def to_internal(self, x: float) -> float:
+        return math.log(x) if self.log else x
+
+    def to_value(self, u: float) -> float:
+        return math.exp(u) if self.log else u
+
+    def span(self) -> float:
+        return math.log(self.high / self.low) if self.log else self.high - self.low
+
+    @property
+    def name(self) -> str:
+        if self.where[0] == "param":
+            return self.where[1]
+        return self.where[2][0] if isinstance(self.where[2], tuple) else self.where[2]
+
+
+def unpack(x, free: list[Slot], base: Model) -> Model:
+    """Values (physical units) of the free slots -> Model."""
+    model = Model([dict(e) for e in base.effects], dict(base.parameters))
+    for value, slot in zip(x, free):
+        if slot.where[0] == "param":
+            model.parameters[slot.where[1]] = float(value)
+        else:
+            names = slot.where[2] if isinstance(slot.where[2], tuple) else (slot.where[2],)
+            for name in names:
+                model.effects[slot.where[1]][name] = float(value)
+    return model
+
+
+def value_of(model: Model, slot: Slot) -> float:
+    if slot.where[0] == "param":
+        return model.parameters.get(slot.where[1], 1.0)
+    return model.effects[slot.where[1]][slot.name]
+
+
+def rig_slots(data: Data) -> list[Slot]:
+    """The rig's refit parameters as slots: ratios within 1 +- tolerance (rigs.md section 4)."""
+    return [Slot(("param", n), 1 - p["tolerance"], 1 + p["tolerance"]) for n, p in data.rig.parameters.items()]
+
+
+def _fd_step(slot: Slot, u: float) -> float:
+    """Finite-difference step in internal units: large enough to see through stick-slip."""
+    h = 0.1 if slot.log else 0.05 * slot.span()
+    hi = slot.to_internal(slot.high)
+    return h if u + h <= hi else -h
+
+
+def jacobian(evaluate, base: Model, free: list[Slot], u: np.ndarray, r: np.ndarray,
+             known: dict[int, np.ndarray] | None = None) -> np.ndarray:
+    """Columns d(residual)/d(internal value) at u; `known` columns (by slot index) are reused.
+    `evaluate(models)` returns the residual vectors (None where a model diverged)."""
+    known = dict(known or {})
+    todo = [i for i in range(len(free)) if i not in known]
+    steps, models = {}, []
+    for i in todo:
+        steps[i] = _fd_step(free[i], u[i])
+        v = np.array(u, float)
+        v[i] += steps[i]
+        models.append(unpack([s.to_value(x) for s, x in zip(free, v)], free, base))
+    for i, rv in zip(todo, evaluate(models)):
+        known[i] = np.zeros_like(r) if rv is None else (rv - r) / steps[i]
+    return np.column_stack([known[i] for i in range(len(free))]) if free else np.zeros((r.size, 0))
+
+
+def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None = None,
+              iters: int = 6, r0: np.ndarray | None = None, floor: float = 0.0) -> tuple[Model, float, np.ndarray]:
+    """Bounded Levenberg-Marquardt on the training residual: the Jacobian is given (signatures)
+    or taken by finite differences once, then kept current by Broyden updates, so each
+    iteration costs one simulation of the training data. Stops early once the squared residual
+    is within 1.2 x `floor` (what noise alone leaves). Returns (model, cost, J)."""
+    lo = np.array([s.to_internal(s.low) for s in free])
+    hi = np.array([s.to_internal(s.high) for s in free])
+    u = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi)
+    model = unpack([s.to_value(x) for s, x in zip(free, u)], free, base)
+    r = r0 if r0 is not None else evaluate([model])[0]
+    if r is None:
+        raise SimulationError("the starting model diverges")
+    if J is None:
+        J = jacobian(evaluate, base, free, u, r)
+    span = hi - lo
+    cost, lam = float(r @ r), 1e-3
+    for _ in range(iters):
+        if cost <= 1.2 * floor:
+            break
+        A = J * span
+        scale = float(np.mean(np.sum(A * A, axis=0))) or 1.0
+        M = np.vstack([A, math.sqrt(lam * scale) * np.eye(len(free))])
+        z = lsq_linear(M, np.concatenate([-r, np.zeros(len(free))]), bounds=((lo - u) / span, (hi - u) / span)).x
+        step = z * span
+        if np.max(np.abs(z)) < 1e-5:
+            break
+        trial = unpack([s.to_value(x) for s, x in zip(free, u + step)], free, base)
+        r_new = evaluate([trial])[0]
+        if r_new is None:
+            lam *= 10
+            continue
+        J = J + np.outer(r_new - r - J @ step, step) / float(step @ step)  # Broyden: the secant we saw
+        new = float(r_new @ r_new)
+        log.debug("LM: cost %.6g -> %.6g (lambda %.2g, step %s)", cost, new, lam, np.round(z, 4))
+        if new < cost:
+            u, r, model, gained, cost = u + step, r_new, trial, (cost - new) / cost, new
+            lam = max(lam / 5, 1e-6)
+            if gained < 1e-3:
+                break
+        else:
+            lam *= 5
+    return model, 0.5 * cost, J
+
+
+def refit_parameters(data: Data, base: Model, runner=None, J: np.ndarray | None = None, iters: int = 4) -> Model:
+    """Refit the rig's parameters within their tolerances (rigs.md section 4) on the training data."""
+    free = rig_slots(data)
+    if not free:
+        return base
+    if runner is None:
+        hold(data)
+    model, _, _ = levenberg(evaluator(runner), base, free, [value_of(base, s) for s in free], J, iters)
+    return model
+
+
+def serial_inflation(r: np.ndarray) -> float:
+    """How much serial correlation shrinks the information in residual `r`: (1 + phi) / (1 - phi)
+    with phi its lag-1 autocorrelation (an AR(1) residual; 1 for white noise)."""
+    if r.size < 3 or not np.any(r):
+        return 1.0
+    phi = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.99))
+    return (1 + phi) / (1 - phi)
+
+
+def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray) -> dict[int, tuple[float, float]]:
+    """95 % intervals (physical units) of the free slots, by slot index: covariance
+    s^2 (J'J)^-1 with s^2 the residual variance per degree of freedom, times the serial-correlation
+    inflation; a parameter the residual does not depend on gets its whole bounds."""
+    n, p = r.size, len(free)
+    if p == 0 or n <= p:
+        return {}
+    s2 = float(r @ r) / (n - p) * serial_inflation(r)
+    cov = s2 * np.linalg.pinv(J.T @ J)
+    out = {}
+    for i, slot in enumerate(free):
+        u = slot.to_internal(value_of(model, slot))
+        sd = math.sqrt(max(float(cov[i, i]), 0.0))
+        if not np.any(J[:, i]) or not math.isfinite(sd):
+            out[i] = (slot.low, slot.high)
+            continue
+        lo, hi = slot.to_value(u - 1.96 * sd), slot.to_value(u + 1.96 * sd)
+        out[i] = (float(lo), float(hi))
+    return out

@@ -1,0 +1,397 @@
+"""The whole diagnosis, stage by stage, and its verdict.
+
+Contract: `diagnose(recordings, names)` returns the report of recordings.md section 2 (plus 'sims' for
+plotting). Stages: re-simulate with the nominal model; refit the rig's parameters within tolerance
+(kept only if validation does not get worse); locate; rounds of screening, candidate fits and a polish
+of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
+validation by MIN_HELD_GAIN; backward elimination (a finding whose removal from the final model does
+not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
+when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
+the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data,
+`explained` when the findings bring both there, `unexplained` otherwise.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..effects import CATALOGUE
+from ..model import ConfigError
+from ..recording import Recording
+from .data import Data, Model, fit_scores, noise_cost, noise_nrmse, prepare, residual_vector
+from .explain import finding, units_at
+from .fitting import Slot, intervals, jacobian, levenberg, rig_slots, value_of
+from .locate import locate
+from .runner import Runner, evaluator
+from .screening import (FIT_ITERATIONS, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
+                        make_candidate, screen, scored, shortlist, signatures)
+
+MIN_GAIN = 0.02  # training noise ratio must fall by this fraction per fitted parameter, at least
+MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
+NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
+MIN_EXCESS_GAIN = 0.25  # an effect must remove at least this share of the validation residual above the noise
+EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
+ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
+AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
+POLISH_ITERATIONS = 6
+REFIT_ITERATIONS = 8
+KNOB_OF = {"sensor_gain": "sensor_gain", "actuator_gain": "actuator_gain", "link_stiffness_change": "chain_stiffness",
+           "structural_damping": "chain_damping"}  # effects that turn a knob the rig may refit: within tolerance, not physics
+
+
+class Stages:
+    """Names the stage in progress, tells the user, and adds up wall time (s) and simulation
+    jobs per kind of stage (the report's "timing")."""
+
+    def __init__(self, say, runner: Runner):
+        self.say, self.runner = say, runner
+        self.table: dict[str, dict[str, float]] = {}
+        self.kind, self.t0, self.jobs0 = None, time.perf_counter(), 0
+
+    def __call__(self, kind: str, message: str) -> None:
+        now = time.perf_counter()
+        if self.kind is not None:
+            row = self.table.setdefault(self.kind, {"seconds": 0.0, "jobs": 0})
+            row["seconds"] += now - self.t0
+            row["jobs"] += self.runner.jobs - self.jobs0
+        self.kind, self.t0, self.jobs0 = kind, now, self.runner.jobs
+        if kind != "done":
+            self.say(message)
+
+
+def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, max_effects: int = 2,
+             screen_top: int = SCREEN_TOP, progress=None, jobs_done=None, propose: bool = True) -> dict:
+    """Run the whole diagnosis; return the report (recordings.md schema) plus 'sims' for plotting.
+
+    `progress(message)` hears each stage, `jobs_done(done, total)` each finished simulation job of a
+    stage. With `propose`, a discriminating experiment is proposed when alternatives remain (the
+    scenario itself is written by report.write_report). Raises ConfigError for recordings that cannot
+    be diagnosed together."""
+    data = prepare(recordings, names)
+    with Runner(data, workers, jobs_done) as runner:
+        stages = Stages(progress or (lambda message: None), runner)
+        report = _diagnose(data, runner, max_effects, screen_top, stages, propose)
+        stages("done", "done")
+        report["timing"] = stages.table
+        return report
+
+
+def _gains(result: dict, train_now: float, held_now: float) -> dict:
+    """Relative falls of the training and validation noise ratios, the share of the validation residual
+    above the noise it removes, and the score that charges every parameter."""
+    train_gain = (train_now - result["train"]["noise_ratio"]) / train_now
+    held_gain = (held_now - result["held_out"]["noise_ratio"]) / held_now
+    excess_gain = (held_now - result["held_out"]["noise_ratio"]) / max(held_now - 1.0, 1e-9)
+    return {**result, "train_gain": train_gain, "held_gain": held_gain, "excess_gain": excess_gain,
+            "score": train_gain + held_gain - MIN_GAIN * result["n_params"]}
+
+
+def _earns_place(result: dict) -> bool:
+    """Training better by MIN_GAIN per parameter, validation by MIN_HELD_GAIN and by MIN_EXCESS_GAIN of
+    what it had above the noise."""
+    return (result["train_gain"] >= MIN_GAIN * result["n_params"] and result["held_gain"] >= MIN_HELD_GAIN
+            and result["excess_gain"] >= MIN_EXCESS_GAIN)
+
+
+def explained_share(before: float, after: float) -> float:
+    """Share of the residual above the noise (noise ratio - 1) that a model removes."""
+    return (before - after) / max(before - 1.0, 1e-9) if before > 1.0 else 1.0
+
+
+def within_noise(scores_train: dict, scores_held: dict) -> bool:
+    return scores_train["noise_ratio"] <= NOISE_MARGIN and scores_held["noise_ratio"] <= NOISE_MARGIN
+
+
+def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say: Stages, propose: bool) -> dict:
+    evaluate = evaluator(runner)
+    say("nominal", "re-simulating with the nominal model")
+    nominal = Model()
+    sims_nominal = runner.simulate(nominal)
+    if sims_nominal is None:
+        raise ConfigError("the nominal model diverges on these recordings")
+    free = rig_slots(data)
+    r_nominal = residual_vector(data, sims_nominal)
+    say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
+    at = np.array([value_of(nominal, s) for s in free])
+    rig_columns = jacobian(evaluate, nominal, free, at, r_nominal)
+    current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal, noise_cost(data))[0] if free else nominal
+    sims = runner.simulate(current)
+    if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
+        current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
+    steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
+    refit_sims, refit_model = sims, current
+    mismatch = locate(data, sims)
+    rejected, screened_report, fitted_report, alternatives = [], [], [], []
+    round_ = 0
+    while len(current.effects) < max_effects:
+        train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+        if within_noise(train, held):
+            say("verdict", f"training {train['noise_ratio']:.2f} x and validation {held['noise_ratio']:.2f} x the noise "
+                f"(within {NOISE_MARGIN:g} x): nothing left to explain")
+            break
+        round_ += 1
+        r0 = residual_vector(data, sims)
+        # signatures are taken around the current model: an effect can look different once
+        # another is in (a slip shows only where stiction lets the joint move)
+        live = [make_candidate(data, e, w) for e, w in candidates(data, current.effects)]
+        say("signatures", f"round {round_}: taking the signatures of {len(live)} candidate effects "
+            f"({sum(len(c.probes()) for c in live)} probe simulations)")
+        signatures(data, runner, current, sims, r0, live)
+        screen(live, rig_columns, free, np.array([value_of(current, s) for s in free]), r0)
+        live.sort(key=lambda c: (-c.gain, c.effect, c.where))
+        screened_report.append([{"effect": c.effect, "where": c.where, "explained": round(c.gain, 4)} for c in live[:8]])
+        top = shortlist(live, screen_top)
+        if not top:
+            break
+        say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
+            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
+        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS) for c in top])
+        rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
+        fitted = [_gains(r, train["noise_ratio"], held["noise_ratio"]) for r in results if "error" not in r]
+        if not fitted:
+            break
+        fitted.sort(key=lambda r: (-r["score"], r["effect"], r["where"]))
+        fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
+                               "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
+                               "validation_noise_ratio": round(r["held_out"]["noise_ratio"], 4),
+                               "score": round(r["score"], 4)} for r in fitted])
+        best = fitted[0]
+        if _earns_place(best):
+            say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
+            best = _gains(polish(data, runner, best), train["noise_ratio"], held["noise_ratio"])
+            room = max_effects - len(current.effects) >= 2
+            alternative = offset_alternative(data, runner, current, best) if room else None
+            if alternative is not None:
+                alternative = _gains(alternative, train["noise_ratio"], held["noise_ratio"])
+                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative):
+                    say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
+                    best = alternative
+        if not _earns_place(best):  # judged on the final (polished) model, never on a promise
+            rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
+                             "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"]})
+            break
+        alternatives += [_alternative(data, r, best) for r in fitted[1:]
+                         if r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
+        say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
+            f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
+        current, sims = best["model"], best["sims"]
+        steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
+        mismatch = locate(data, sims) or mismatch
+    found = len(current.effects)
+    current = fold_within_tolerance(data, current)
+    if len(current.effects) < found:
+        sims = runner.simulate(current) or sims
+    current, sims, ablated = eliminate(data, runner, current, sims, say)
+    if len(current.effects) < found:
+        steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
+    say("intervals", "95 % intervals from the Jacobian at the final model")
+    ranges = final_intervals(data, runner, current)
+    train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+    refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
+    findings = []
+    for i, effect in sorted(enumerate(current.effects), key=lambda ie: -ablated[ie[0]]):
+        scores = {"train_before": refit_train["nrmse"], "train_after": train_f["nrmse"], "held_before": refit_held["nrmse"],
+                  "held_after": held_f["nrmse"], "ratio_before": refit_held["noise_ratio"], "ratio_after": held_f["noise_ratio"],
+                  "ablated": ablated[i]}
+        findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
+    share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
+    if not current.effects:
+        verdict = "nothing_missing" if within_noise(train_f, held_f) else "unexplained"
+    else:
+        verdict = "explained" if within_noise(train_f, held_f) or share >= EXPLAINED_SHARE else "unexplained"
+    alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
+    report = {
+        "format": "flexarm-diagnosis/1",
+        "rig": data.rig.name,
+        "recordings": data.names,
+        "verdict": verdict,
+        "verdict_reason": _verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share),
+        "mismatch": locate(data, sims_nominal),
+        "findings": findings,
+        "alternatives": alternatives,
+        "fit_before": fit_scores(data, sims_nominal, "all"),
+        "fit_after": fit_scores(data, sims, "all"),
+        "held_out": {"before": fit_scores(data, sims_nominal, "held_out"), "after": held_f, "how": data.how},
+        "refit_parameters": {n: current.parameters[n] for n in current.parameters},
+        "parameters_at_bounds": at_bounds(data, current if current.parameters else refit_model),
+        "noise_nrmse": noise_nrmse(data),
+        "noise": {"margin": NOISE_MARGIN, "training_ratio": train_f["noise_ratio"], "validation_ratio": held_f["noise_ratio"],
+                  "per_channel": _noise_table(data)},
+        "steps": steps,
+        "screening": screened_report,
+        "candidates": fitted_report,
+        "rejected": rejected,
+        "patch": {"effects": current.effects, "parameters": current.parameters},
+        "sims": {"nominal": sims_nominal, "final": sims},
+    }
+    if verdict == "unexplained":
+        report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
+                              "validation_noise_ratio": held_f["noise_ratio"], "candidates_tried": fitted_report,
+                              "parameters_at_bounds": report["parameters_at_bounds"]}
+    if propose and alternatives:
+        from .experiment import propose_experiment
+
+        say("experiment", f"simulating {len(alternatives) + 1} explanations on the rig's experiment menu")
+        report["proposed_experiment"] = propose_experiment(data, current, alternatives, runner)
+    return report
+
+
+def _noise_table(data: Data) -> list[dict]:
+    return [{"recording": n, "channel": c, "noise": noise[c], "declared": float(data.rig.channels[c].get("noise", 0.0)),
+             "unit": data.rig.channels[c]["unit"]} for n, chans, noise in zip(data.names, data.channels, data.noise) for c in chans]
+
+
+def _verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float) -> str:
+    now = f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise"
+    if verdict == "nothing_missing":
+        return f"the nominal model, refit within tolerance, is within {NOISE_MARGIN:g} x the noise: {now}"
+    if verdict == "explained":
+        within = within_noise(train, held)
+        return ((f"the findings bring the model within {NOISE_MARGIN:g} x the noise" if within else
+                 f"the findings remove {100 * share:.0f} % of the validation residual above the noise (at least "
+                 f"{100 * EXPLAINED_SHARE:.0f} % asked); what is left no further catalogue effect explains")
+                + f" ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, {refit_held['noise_ratio']:.2f} x)")
+    return (f"the residual stays above {NOISE_MARGIN:g} x the noise ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, "
+            f"{refit_held['noise_ratio']:.2f} x) and no further catalogue effect earns its place: see 'residual'")
+
+
+def _alternative(data: Data, result: dict, chosen: dict) -> dict:
+    effect = result["model"].effects[-1]
+    params = {k: v for k, v in effect.items() if k not in ("effect", "where")}
+    return {"effect": result["effect"], "where": result["where"], "parameters": params,
+            "units": units_at(data, result["effect"], result["where"]),
+            "validation_nrmse": result["held_out"]["nrmse"], "validation_noise_ratio": result["held_out"]["noise_ratio"],
+            "instead_of": chosen["effect"],
+            "why_not_chosen": (f"validation {result['held_out']['noise_ratio']:.3f} x the noise against "
+                               f"{chosen['held_out']['noise_ratio']:.3f} x for {chosen['effect']} at {chosen['where']} "
+                               f"(score {result['score']:.3f} vs {chosen['score']:.3f}, {result['n_params']} parameters): "
+                               "within noise of each other, the data cannot tell them apart"),
+            "model": {"effects": result["model"].effects, "parameters": result["model"].parameters}}
+
+
+def fold_within_tolerance(data: Data, model: Model) -> Model:
+    """An effect that turns a knob the rig refits (a sensor or actuator gain, a link's stiffness or damping)
+    and, combined with the refit ratio, stays within that parameter's tolerance is parameter error, not
+    missing physics: it goes into the refit parameters."""
+    effects, parameters = [], dict(model.parameters)
+    for effect in model.effects:
+        knob = KNOB_OF.get(effect["effect"])
+        name = next((n for n, p in data.rig.parameters.items() if (p["knob"], p["target"]) == (knob, effect["where"])), None)
+        if name is not None:
+            ratio = parameters.get(name, 1.0) * effect["ratio"]
+            if abs(ratio - 1) <= data.rig.parameters[name]["tolerance"]:
+                parameters[name] = ratio
+                continue
+        effects.append(effect)
+    return Model(effects, parameters)
+
+
+def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> tuple[Model, list, list[float]]:
+    """Backward elimination: drop, one at a time, an effect whose removal from the final model leaves
+    validation no worse than MIN_HELD_GAIN; returns the model, its simulations and, per remaining
+    effect, the validation noise ratio without it."""
+    while True:
+        held = fit_scores(data, sims, "held_out")["noise_ratio"]
+        if not model.effects:
+            return model, sims, []
+        say("elimination", f"checking each of the {len(model.effects)} findings on validation data without it")
+        without = []
+        for i in range(len(model.effects)):
+            reduced = Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
+            s = runner.simulate(reduced)
+            without.append((fit_scores(data, s, "held_out")["noise_ratio"], reduced, s))
+        worst = int(np.argmin([w[0] for w in without]))
+        if without[worst][0] * (1 + MIN_HELD_GAIN) > held or without[worst][2] is None:
+            return model, sims, [w[0] for w in without]
+        model, sims = without[worst][1], without[worst][2]
+
+
+def final_intervals(data: Data, runner: Runner, model: Model) -> dict[int, dict[str, tuple[float, float]]]:
+    """95 % intervals of every effect parameter of the final model: effect index -> parameter -> (low, high).
+    A quantised parameter (a delay) is good to half its step."""
+    out: dict[int, dict] = {}
+    for i, effect in enumerate(model.effects):
+        for p in CATALOGUE[effect["effect"]][1]:
+            if p.quantum and p.name in effect:
+                out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
+    free = effect_slots_of(data, model) + rig_slots(data)
+    if not model.effects:
+        return out
+    evaluate = evaluator(runner)
+    r = evaluate([model])[0]
+    if r is None:
+        return out
+    u = np.array([s.to_internal(value_of(model, s)) for s in free])
+    J = jacobian(evaluate, model, free, u, r)
+    for k, rng in intervals(free, model, J, r).items():
+        slot = free[k]
+        if slot.where[0] == "effect":
+            out.setdefault(slot.where[1], {})[slot.name] = rng
+    return out
+
+
+def at_bounds(data: Data, model: Model) -> list[dict]:
+    """Refit parameters at (AT_BOUND of) their tolerance: what the datasheet may have wrong, or an
+    effect the parameter is absorbing."""
+    out = []
+    for name, spec in data.rig.parameters.items():
+        ratio = model.parameters.get(name, 1.0)
+        if abs(ratio - 1) >= AT_BOUND * spec["tolerance"]:
+            out.append({"parameter": name, "ratio": ratio, "tolerance": spec["tolerance"], "knob": spec["knob"],
+                        "target": spec["target"]})
+    return out
+
+
+def polish(data: Data, runner: Runner, result: dict) -> dict:
+    """Carry the chosen candidate's fit on from a fresh finite-difference Jacobian at its solution,
+    each simulation split over the workers; keep it if the training fit improved."""
+    free = result["free"]
+    model, cost, J = levenberg(evaluator(runner), result["model"], free, [value_of(result["model"], s) for s in free],
+                               None, POLISH_ITERATIONS, floor=noise_cost(data))
+    if cost >= result["cost"]:
+        return result
+    sims = runner.simulate(model)
+    return result if sims is None else scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
+
+
+def offset_alternative(data: Data, runner: Runner, base: Model, result: dict) -> dict | None:
+    """Asymmetric Coulomb levels a (positive) != b (negative) are also symmetric friction plus a
+    constant actuator bias f = (b - a)/2 pushing the positive way: the two cannot be told apart
+    in steady sliding, only at rest. Fit that alternative (as many parameters) jointly with the
+    rig's parameters and return it scored like a candidate, or None if it does not apply."""
+    if result["effect"] != "coulomb_friction":
+        return None
+    found = result["model"].effects[-1]
+    a, b, where = found["torque_positive"], found["torque_negative"], found["where"]
+    channel = next((c for c in data.rig.effects.get("actuator_offset", [])
+                    if data.rig.channels.get(c, {}).get("joint") == where), None)
+    if channel is None or abs(a - b) <= 0.05 * (a + b) / 2:
+        return None
+    gain = data.rig.channels[channel].get("gain", 1.0)
+    trial = Model(base.effects + [dict(effect="coulomb_friction", where=where, torque_positive=(a + b) / 2, torque_negative=(a + b) / 2),
+                                  dict(effect="actuator_offset", where=channel, offset=(b - a) / 2 / gain)],
+                  dict(result["model"].parameters))
+    i = len(trial.effects) - 2
+    free = [Slot(("effect", i, ("torque_positive", "torque_negative")), 0.0, 2 * max(a, b)),
+            Slot(("effect", i + 1, "offset"), -2 * abs(a - b) / gain, 2 * abs(a - b) / gain)] + rig_slots(data)
+    x0 = [(a + b) / 2, (b - a) / 2 / gain] + [value_of(trial, s) for s in rig_slots(data)]
+    try:
+        model, cost, J = levenberg(evaluator(runner), trial, free, x0, iters=12, floor=noise_cost(data))
+    except Exception:  # noqa: BLE001 - the alternative diverging just means it is not taken
+        return None
+    sims = runner.simulate(model)
+    if sims is None:
+        return None
+    return scored(data, {"effect": "coulomb_friction", "where": where, "model": model, "n_params": 2, "cost": cost,
+                         "free": free, "J": J}, sims)
+
+
+def _scores(data: Data, sims: list[Recording], model: Model) -> dict:
+    """One stage of the report's 'steps': training and validation NRMSE and noise ratio, and the model."""
+    train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+    return {"train_nrmse": train["nrmse"], "held_out_nrmse": held["nrmse"], "train_noise_ratio": train["noise_ratio"],
+            "held_out_noise_ratio": held["noise_ratio"], "effects": [dict(e) for e in model.effects],
+            "parameters": dict(model.parameters)}
+
+

@@ -1,0 +1,139 @@
+"""Simulation jobs of one diagnosis: re-simulating the recordings with a model, in worker processes.
+
+Contract: every worker holds the diagnosis' `Data` (set once by `Runner`); a job is one recording
+simulated with one `Model`. MuJoCo callbacks are process-global, so each process runs one simulation
+at a time. A model that diverges gives None, never an exception. `Runner.close` on an interrupt
+(Ctrl-C) kills the workers at once instead of waiting for their simulations.
+"""
+from __future__ import annotations
+
+import logging
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+import numpy as np
+
+from ..engine import SimulationError
+from ..recording import Recording
+from ..resim import resimulate
+from .data import Data, Model, in_part, residual_vector
+
+log = logging.getLogger(__name__)
+
+
+def last_time(rec: Recording, train: np.ndarray, part: str) -> float | None:
+    """Time (s from the start) after which no sample of `part` is needed: the simulation may stop."""
+    if part != "train" or not train.any():
+        return None
+    return float(rec.time[np.flatnonzero(train)[-1]] - rec.time[0])
+
+
+def simulate_all(data: Data, model: Model, part: str = "all") -> list[Recording] | None:
+    """The recordings re-simulated with `model` (those with samples in `part`; the others are left
+    as the measurement itself, contributing nothing); None if a simulation diverged."""
+    try:
+        return [resimulate(r, model.effects, model.parameters, until=last_time(r, t, part)) if in_part(t, part).any() else r
+                for r, t in zip(data.recordings, data.train)]
+    except SimulationError as exc:
+        log.info("model %s diverged: %s", model, exc)
+        return None
+
+
+_DATA: Data | None = None  # the diagnosis' data in this process (set by `Runner`)
+
+
+def hold(data: Data) -> None:
+    global _DATA
+    _DATA = data
+
+
+def held() -> Data:
+    return _DATA
+
+
+def _train_residual(model: Model) -> np.ndarray | None:
+    """Training residual vector of `model` on this process' data; None if it diverged."""
+    sims = simulate_all(_DATA, model, "train")
+    return None if sims is None else residual_vector(_DATA, sims)
+
+
+def _train_piece(job: tuple[Model, int]) -> np.ndarray | None:
+    """The training residual of recording i alone (a piece of _train_residual)."""
+    model, i = job
+    rec, train = _DATA.recordings[i], _DATA.train[i]
+    if not train.any():
+        return np.zeros(0)
+    try:
+        sim = resimulate(rec, model.effects, model.parameters, until=last_time(rec, train, "train"))
+    except SimulationError:
+        return None
+    sims = [sim if j == i else r for j, r in enumerate(_DATA.recordings)]  # the others give zeros
+    return residual_vector(_DATA, sims, only=i)
+
+
+def _simulate_one(job: tuple[Model, int]) -> Recording | None:
+    model, i = job
+    try:
+        return resimulate(_DATA.recordings[i], model.effects, model.parameters)
+    except SimulationError:
+        return None
+
+
+class Runner:
+    """Simulation jobs on one diagnosis' data, in `workers` processes, or here when workers <= 1."""
+
+    def __init__(self, data: Data, workers: int, jobs_done=None):
+        hold(data)
+        self.data = data
+        self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
+        self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
+        self.pool = ProcessPoolExecutor(workers, initializer=hold, initargs=(data,)) if workers > 1 else None
+
+    def map(self, fn, jobs: list) -> list:
+        """fn over jobs, in order; reports progress as jobs finish."""
+        self.jobs += len(jobs)
+        if self.pool is None or len(jobs) <= 1:
+            out = []
+            for job in jobs:
+                out.append(fn(job))
+                self.jobs_done(len(out), len(jobs))
+            return out
+        futures = [self.pool.submit(fn, j) for j in jobs]
+        for done, _ in enumerate(as_completed(futures), 1):
+            self.jobs_done(done, len(jobs))
+        return [f.result() for f in futures]
+
+    def simulate(self, model: Model) -> list[Recording] | None:
+        """Every recording re-simulated with `model` (one job per recording); None if one diverged."""
+        sims = self.map(_simulate_one, [(model, i) for i in range(len(self.data.recordings))])
+        return None if any(s is None for s in sims) else sims
+
+    def close(self, interrupted: bool = False) -> None:
+        if self.pool is None:
+            return
+        if interrupted:  # Ctrl-C: do not wait for simulations in flight
+            for process in list(getattr(self.pool, "_processes", {}).values()):
+                process.kill()
+        self.pool.shutdown(wait=not interrupted, cancel_futures=True)
+
+    def __enter__(self) -> "Runner":
+        return self
+
+    def __exit__(self, kind, *exc) -> None:
+        self.close(interrupted=kind is not None and issubclass(kind, KeyboardInterrupt))
+
+
+def evaluator(runner: Runner | None):
+    """models -> training residual vectors: in the pool (one job per model and recording) or in
+    this process."""
+    if runner is None:
+        return lambda models: [_train_residual(m) for m in models]
+
+    def evaluate(models):
+        n = len(runner.data.recordings)
+        pieces = runner.map(_train_piece, [(m, i) for m in models for i in range(n)])
+        out = []
+        for k in range(len(models)):
+            mine = pieces[k * n:(k + 1) * n]
+            out.append(None if any(p is None for p in mine) else np.concatenate(mine))
+        return out
+    return evaluate

@@ -1,0 +1,296 @@
+"""Screening and candidate fits: which catalogue effect's signature the residual carries, and the fit
+of the most promising ones.
+
+Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings
+can show (`excited`). `signatures` simulates each once per parameter (and probe level) around the
+current model; `screen` scores each by how much of the training residual its signature explains beyond
+refitting the rig's parameters, and keeps that linear estimate as its start; `fit_candidate` (in a
+worker) fits one together with the rig's parameters and the effects already found, and returns its
+scores on training and validation data.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..effects import CATALOGUE
+from ..recording import Recording
+from .data import Data, Model, STRIDE, fit_scores, noise_cost, scale_of
+from .fitting import Slot, jacobian, levenberg, rig_slots, unpack, value_of
+from .runner import evaluator, held, simulate_all
+
+SWITCH_LEVELS = (1.0, 0.1, 0.01)  # x start of a switch candidate's log-scaled size (width, stiffness, ...)
+LARGE_PROBE = 4.0  # x (start - neutral): friction-like levels and `wide` parameters are probed
+# small and large, since a small dry friction can move a closed loop the other way from a large
+# one (stick-slip is not linear) and a mode frequency goes with the square root of a stiffness
+SCREEN_TOP = 2  # candidates fitted in full after the signature screening (one per worker)
+SCREEN_TIE = 0.95  # ... and any more that screen within 5 % of the last of those: a tie in the
+SCREEN_MAX = 4  # screening is no evidence (up to this many; friction laws often screen alike)
+FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one simulation each)
+QUANTUM_STEPS = 2  # a quantised parameter tries its rounded estimate and this many steps either side
+
+
+@dataclass
+class Candidate:
+    """A catalogue effect at one place: its parameters (physical units) with slots, and its
+    signature: the change of the training residual per unit of each parameter that has a
+    neutral value, or (a 'switch') the change the whole effect at its start values makes.
+    Effort-scaled and `wide` parameters are probed at two levels (start and LARGE_PROBE x start)."""
+
+    effect: str
+    where: str
+    start: dict[str, float]
+    slots: dict[str, Slot]
+    neutral: dict[str, float]  # parameters with a value at which the effect vanishes
+    levels: tuple[float, ...] = (1.0,)
+    signature: dict[float, dict[str, np.ndarray]] = field(default_factory=dict)  # level -> parameter -> column
+    estimate: dict[str, float] = field(default_factory=dict)  # linear estimate from the best signature
+    gain: float = 0.0  # screening: fraction of the training cost the signature explains
+    quanta: dict[str, float] = field(default_factory=dict)  # parameters acting in whole steps: the step
+
+    def model(self, base: Model, values: dict[str, float]) -> Model:
+        return Model(base.effects + [dict(effect=self.effect, where=self.where, **values)], dict(base.parameters))
+
+    def probes(self) -> dict[tuple[float, str], dict[str, float]]:
+        """Parameter sets to simulate: (level, parameter) -> values, one per neutral parameter
+        and level, or (1, "switch") with every parameter at its start."""
+        if not self.neutral:  # a log-scaled size is probed over two decades below its start
+            first = next(iter(self.start))
+            levels = SWITCH_LEVELS if self.slots[first].log else (1.0,)
+            return {(level, "switch"): {**self.start, first: self.start[first] * level} for level in levels}
+        at_zero = {**self.start, **self.neutral}
+        return {(level, name): {**at_zero, name: self.probe(name, level)} for level in self.levels for name in self.neutral}
+
+    def probe(self, name: str, level: float = 1.0) -> float:
+        """The value a neutral parameter is probed at: level x its start (or 2 % of its range)
+        off neutral, within its bounds."""
+        slot = self.slots[name]
+        step = self.start[name] - self.neutral[name] or 0.02 * (slot.high - slot.low)
+        return float(np.clip(self.neutral[name] + level * step, slot.low, slot.high))
+
+
+def make_candidate(data: Data, effect: str, where: str) -> Candidate:
+    _, params, _ = CATALOGUE[effect]
+    start, slots, neutral = {}, {}, {}
+    for p in params:
+        size = scale_of(data, p, where)
+        start[p.name] = p.start * size
+        slots[p.name] = Slot(("effect", -1, p.name), p.low * size, p.high * size, p.log)
+        if p.neutral is not None:
+            neutral[p.name] = p.neutral * size
+    levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" or p.wide for p in params) else (1.0,)
+    quanta = {p.name: p.quantum for p in params if p.quantum > 0}
+    return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta)
+
+
+def excited(data: Data, effect: str, where: str) -> bool:
+    """False when the recordings cannot show `effect` at `where`: a joint locked or still in every
+    recording, a command channel that is constant, a sensor channel not compared."""
+    kind = CATALOGUE[effect][2]
+    compared = {c for chans in data.channels for c in chans}
+    if kind == "joint":
+        angles = [c for c, spec in data.rig.channels.items() if spec["kind"] == "measured"
+                  and (c == f"{where}_angle" or spec.get("joint") == where)]
+        commands = [c for c in data.rig.of_kind("command") if data.rig.channels[c].get("joint") == where]
+        moving = [c for c in angles + commands if any(c in chans for chans in data.channels)]
+        return bool(moving) or not (angles or commands)
+    if kind == "command" and effect != "delay":
+        return where in compared
+    if kind == "channel" or (effect == "delay" and where != "command"):
+        return where in compared
+    return True
+
+
+def candidates(data: Data, have: list[dict]) -> list[tuple[str, str]]:
+    """(effect, where) pairs the rig allows, the recordings can show, and the model does not have yet."""
+    taken = {(e["effect"], e["where"]) for e in have}
+    return [(effect, where) for effect, places in data.rig.effects.items() for where in places
+            if (effect, where) not in taken and excited(data, effect, where)]
+
+
+class _Reads(dict):
+    """A dict that notes which keys were read (the channels a controller feeds back)."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.read = set()
+
+    def __getitem__(self, key):
+        self.read.add(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        self.read.add(key)
+        return super().get(key, default)
+
+
+def fed_back(data: Data) -> set[str]:
+    """Channels some recording's controller reads: a sensor effect there changes the motion."""
+    from ..engine import ControlLoop
+    from ..resim import scenario_from_recording
+
+    channels = set()
+    for rec in data.recordings:
+        scenario = scenario_from_recording(rec)
+        scenario["duration_s"] = 0.002
+        loop = ControlLoop(scenario, data.rig.parameter_knobs())
+        with loop:
+            obs = _Reads(loop.rig.observe(loop.references[0]))
+            loop.controller(0.0, obs)
+        channels |= obs.read
+    return channels
+
+
+def _layout(data: Data, sims: list[Recording], channel: str, stride: int = STRIDE) -> tuple[np.ndarray, np.ndarray]:
+    """(entries of the training residual vector that belong to `channel`, simulated value / spread there)."""
+    mask, values = [], []
+    for sim, chans, scale, train in zip(sims, data.channels, data.scale, data.train):
+        idx = np.flatnonzero(train)[::stride]
+        if not idx.size:
+            continue
+        for c in chans:
+            mask.append(np.full(idx.size, c == channel))
+            values.append(np.nan_to_num(sim.channels[c][idx] / scale[c]) if c == channel else np.zeros(idx.size))
+    return np.concatenate(mask), np.concatenate(values)
+
+
+def sensor_signature(data: Data, sims: list[Recording], cand: Candidate) -> dict[str, np.ndarray]:
+    """Signature of a gain or offset on a channel no controller reads, without simulating."""
+    mask, values = _layout(data, sims, cand.where)
+    if cand.effect == "sensor_offset":
+        spread = {c: s for sc in data.scale for c, s in sc.items()}[cand.where]
+        return {"offset": mask / spread}
+    return {"ratio": values}
+
+
+def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate]) -> None:
+    """Fill each candidate's signature columns: one simulation per probe, in parallel."""
+    looped = fed_back(data)
+    jobs, owners = [], []
+    for cand in cands:
+        if cand.effect in ("sensor_gain", "sensor_offset") and cand.where not in looped:
+            cand.signature = {1.0: sensor_signature(data, sims, cand)}
+            continue
+        for key, values in cand.probes().items():
+            jobs.append(cand.model(base, values))
+            owners.append((cand, key))
+    for (cand, (level, name)), r in zip(owners, evaluator(runner)(jobs)):
+        if r is None:
+            continue  # this probe diverges: no signature at this level
+        step = 1.0 if name == "switch" else cand.probe(name, level) - cand.neutral[name]
+        cand.signature.setdefault(level, {})[name] = (r - r0) / step
+
+
+def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at: np.ndarray, r0: np.ndarray) -> None:
+    """Score each candidate by how much of the training residual its signature explains beyond
+    what refitting the rig's parameters explains (bounded linear least squares), and keep the
+    linear estimate of its parameters as the start of its fit."""
+    cost0 = float(r0 @ r0) or 1.0
+    lo = np.array([s.low for s in free]) - at
+    hi = np.array([s.high for s in free]) - at
+
+    def solve(columns, low, high):
+        norms = np.linalg.norm(columns, axis=0)
+        norms[norms == 0] = 1.0
+        result = lsq_linear(columns / norms, -r0, bounds=(low * norms, high * norms))
+        return float(np.sum((r0 + columns @ (result.x / norms)) ** 2)), result.x / norms
+
+    cost_rig = solve(rig_columns, lo, hi)[0] if free else cost0
+    for cand in cands:
+        cand.gain, cand.estimate = -math.inf, dict(cand.start)
+        for level, columns in cand.signature.items():
+            names = list(columns)
+            cols = np.column_stack([rig_columns] + [columns[n][:, None] for n in names])
+            low = [cand.slots[n].low - cand.neutral[n] if n != "switch" else 0.0 for n in names]
+            high = [cand.slots[n].high - cand.neutral[n] if n != "switch" else 3.0 for n in names]
+            cost, x = solve(cols, np.r_[lo, low], np.r_[hi, high])
+            if (cost_rig - cost) / cost0 <= cand.gain:
+                continue
+            cand.gain = (cost_rig - cost) / cost0
+            cand.estimate = dict(cand.probes()[(level, "switch")]) if "switch" in columns else dict(cand.start)
+            for n, a in zip(names, x[len(free):]):
+                if n != "switch":
+                    slot = cand.slots[n]
+                    value = float(np.clip(cand.neutral[n] + a, slot.low, slot.high))
+                    cand.estimate[n] = value if value > 0 or not slot.log else cand.start[n]
+
+
+def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Candidate]:
+    """The candidates to fit in full, from those ranked by screening gain: the first `screen_top`
+    that explain anything, and any more (to SCREEN_MAX) within SCREEN_TIE of the last of them."""
+    top = [c for c in ranked[:screen_top] if c.gain > 0]
+    return top + [c for c in ranked[screen_top:SCREEN_MAX] if top and c.gain >= SCREEN_TIE * top[-1].gain]
+
+
+def effect_slots_of(data: Data, model: Model) -> list[Slot]:
+    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
+    value clamped inside them."""
+    slots = []
+    for i, effect in enumerate(model.effects):
+        for p in CATALOGUE[effect["effect"]][1]:
+            if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
+                size = scale_of(data, p, effect["where"])
+                low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
+                slots.append(Slot(("effect", i, p.name), low, high, p.log))
+    return slots
+
+
+def step_search(evaluate, cand: Candidate, base: Model) -> dict[str, float]:
+    """The candidate's start values: its linear estimate, with each quantised parameter (a delay
+    in whole control periods has no gradient) set to the best of the rounded estimate and its
+    neighbours, never the neutral 0 steps."""
+    values = dict(cand.estimate)
+    for name, quantum in cand.quanta.items():
+        slot, k0 = cand.slots[name], round(values[name] / quantum)
+        grid = [k * quantum for k in range(k0 - QUANTUM_STEPS, k0 + QUANTUM_STEPS + 1)
+                if k >= 1 and slot.low <= k * quantum <= slot.high]
+        if grid:
+            costs = [math.inf if r is None else float(r @ r)
+                     for r in evaluate([cand.model(base, {**values, name: v}) for v in grid])]
+            values[name] = grid[int(np.argmin(costs))]
+    return values
+
+
+def scored(data: Data, result: dict, sims: list[Recording]) -> dict:
+    """`result` with its simulations and scores on every part."""
+    return {**result, "sims": sims, "train": fit_scores(data, sims, "train"),
+            "held_out": fit_scores(data, sims, "held_out"), "all": fit_scores(data, sims, "all")}
+
+
+def fit_candidate(args) -> dict:
+    """Fit one candidate on top of `base` together with the rig's parameters (worker process):
+    start at its linear estimate, Jacobian columns of the rig's parameters from the signatures,
+    of its own parameters by finite differences there; return its scores."""
+    base, cand, rig_columns, iters = args
+    data = held()
+    evaluate = evaluator(None)
+    values = step_search(evaluate, cand, base)
+    trial = cand.model(base, values)
+    index = len(trial.effects) - 1
+    fitted_names = [n for n in cand.slots if n not in cand.quanta]  # a quantised one stays at its step
+    effect_slots = [Slot(("effect", index, n), cand.slots[n].low, cand.slots[n].high, cand.slots[n].log) for n in fitted_names]
+    earlier = effect_slots_of(data, base)  # the effects found before are refit with it
+    free = effect_slots + earlier + rig_slots(data)
+    x0 = [values[n] for n in fitted_names] + [value_of(base, s) for s in earlier + rig_slots(data)]
+    failed = {"effect": cand.effect, "where": cand.where}
+    try:
+        lo = np.array([s.to_internal(s.low) for s in free])
+        u0 = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, [s.to_internal(s.high) for s in free])
+        r = evaluate([unpack([s.to_value(x) for s, x in zip(free, u0)], free, trial)])[0]
+        if r is None:
+            return {**failed, "error": "diverges at its starting values"}
+        known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
+        J = jacobian(evaluate, trial, free, u0, r, known)
+        model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r,
+                                   noise_cost(data))
+    except Exception as exc:  # noqa: BLE001 - a candidate that fails is dropped and reported, never fatal
+        text = str(exc).splitlines()[0] if str(exc) else ""
+        return {**failed, "error": f"{type(exc).__name__}: {text}"}
+    sims = simulate_all(data, model)
+    if sims is None:
+        return {**failed, "error": "the fitted model diverges"}
+    return scored(data, {**failed, "model": model, "n_params": len(cand.slots), "cost": cost,
+                         "screen_gain": cand.gain, "free": free, "J": J}, sims)
