@@ -24,6 +24,7 @@ from ..rigdesc import RigDescription, load_rig
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
 BLOCKS_PER_RECORDING = 60  # alternate blocks per recording (train, validate, train, ...): short enough that a transient is split
 BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
+SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
 
 
@@ -80,11 +81,20 @@ def measured_noise(values: np.ndarray) -> float:
 
 
 def split_blocks(time: np.ndarray) -> tuple[np.ndarray, float]:
-    """Training mask of one recording (alternate blocks, the first one training, only within
-    FIT_SECONDS) and the block length (s)."""
+    """Training mask of one recording and the block length (s): blocks of equal length, half of them
+    (a fixed pseudo-random choice, the first block always training) fit and half validate, so a
+    periodic experiment (pulses, a triangle wave) cannot fall into one half only, as it would with
+    strictly alternate blocks; samples after FIT_SECONDS only validate."""
     t = time - time[0]
     block = float(np.clip(t[-1] / BLOCKS_PER_RECORDING, *BLOCK_LIMITS_S))
-    return ((t // block) % 2 == 0) & (t < FIT_SECONDS), block
+    index = (t // block).astype(int)
+    n = int(index[-1]) + 1
+    order = np.random.default_rng(SPLIT_SEED).permutation(n)
+    training = np.zeros(n, bool)
+    training[order[: (n + 1) // 2]] = True
+    if not training[0]:  # the start (initial conditions) is always fitted: swap it with a training block
+        training[order[(n + 1) // 2 - 1]], training[0] = False, True
+    return training[index] & (t < FIT_SECONDS), block
 
 
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
@@ -116,8 +126,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         train.append(mask)
         blocks.append(block)
     longer = any(r.time[-1] - r.time[0] > FIT_SECONDS for r in recordings)
-    how = (f"every recording in alternate blocks of {min(blocks):.2g}-{max(blocks):.2g} s: even blocks fitted, "
-           f"odd blocks validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
+    how = (f"every recording in blocks of {min(blocks):.2g}-{max(blocks):.2g} s, half of them (a fixed pseudo-random "
+           f"choice) fitted, the other half validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
            + "; the same regimes in both, whatever the file order")
     return Data(recordings, names, rig, channels, scale, noise, train, how)
 
