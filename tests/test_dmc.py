@@ -13,8 +13,9 @@ from watflex_sim.model import ConfigError
 from watflex_sim.params import LASER_ARM, WATFLEX
 
 LASER_KEYS = ["reference", "hub_angle", "tip_sensor"]
+# watflex_elbow_step is the single-link set-up (rigs.md §2): link 1 and its bridges are not mounted
 WATFLEX_KEYS = ["shoulder_reference", "elbow_reference", "shoulder_angle", "elbow_angle",
-                "strain_1A", "strain_1B", "strain_1C", "strain_2A", "strain_2B", "tip_x", "tip_y"]
+                "strain_2A", "strain_2B", "tip_x", "tip_y"]
 
 
 def pd(rig, obs):
@@ -127,7 +128,9 @@ def test_matches_engine_simulate_step_for_step():
 def test_physics_readouts():
     physics = dmc.FlexArmPhysics.from_rig("watflex", locked_joints={"shoulder": 0.0})
     assert list(physics.joint_angles()) == ["elbow"]
-    assert physics.bending_angles("link1").shape == (WATFLEX.n_segments,)
+    assert physics.bending_angles("link2").shape == (WATFLEX.n_segments,)
+    with pytest.raises(ValueError, match="no flexible chain 'link1'"):  # single-link set-up: link 1 rigid
+        physics.bending_angles("link1")
     # m, rigs.md §2; the committed XML's 6 significant digits leave 2 um
     assert physics.tip_position()[0] == pytest.approx(0.13 + 0.47 + 0.115 + 0.14 + 0.47 + 0.083, abs=1e-5)
     with pytest.raises(ValueError, match="no flexible chain 'beam'"):

@@ -27,6 +27,9 @@ from watflex_sim.rigs import WatflexRig
 
 ROOT = Path(__file__).resolve().parent.parent
 BOTH_LOCKED = {"shoulder": 0.0, "elbow": 0.0}
+# Tests of the two-link structure hold both hinges but keep link 1 flexible on the elbow air
+# bearing (load_model(single_link=False)); a shoulder lock alone is the single-link set-up of
+# rigs.md §2, tested in tests/test_single_link.py.
 HUB_LOCKED = {"hub": 0.0}
 
 
@@ -209,7 +212,7 @@ def test_gauge_strain_matches_thesis_eq_3_3(link, force):
     Measured: every gauge +0.21 % (w of the chain is 0.21 % short of F l^3/3EI while the
     chain's hinge moments, hence curvature, are exact for a tip load).
     """
-    model = load_model("watflex", locked_joints=BOTH_LOCKED)
+    model = load_model("watflex", locked_joints=BOTH_LOCKED, single_link=False)
     data = mujoco.MjData(model)
     beam = WATFLEX.link1 if link == 1 else WATFLEX.link2
     n = WATFLEX.n_segments
@@ -251,7 +254,7 @@ def test_laser_arm_inertia_about_hub():
 
 def _energy_model(rig: str, locks: dict, timestep: float | None = None):
     """Model with energy computation on, data at rest (Watflex bearings settled on the glass)."""
-    model = load_model(rig, locked_joints=locks, timestep=timestep)
+    model = load_model(rig, locked_joints=locks, timestep=timestep, single_link=False)
     model.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
@@ -377,7 +380,7 @@ def test_air_bearings_carry_the_weight(locks):
     §2). Elbow: elbow housing 6.8 kg + everything under link2_root except the end effector
     (body_subtreemass). Measured: 79.461 N and 68.991 N (7.0327 kg), errors < 1e-9.
     """
-    model = load_model("watflex", locked_joints=locks)
+    model = load_model("watflex", locked_joints=locks, single_link=False)
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
     mujoco.mj_step(model, data, nstep=int(round(0.5 / model.opt.timestep)))

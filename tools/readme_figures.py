@@ -19,7 +19,7 @@ def main() -> None:
     print(plot_recording(positive, DOCS / "laser_arm_step.png", {"anticlockwise": negative},
                          title="laser arm, 2.5 mm tip step, 0.7 kg payload, PD Kp = 0.127 V/V"))
     print(plot_recording(run_scenario("watflex_elbow_step"), DOCS / "watflex_elbow_step.png",
-                         title="Watflex elbow PD step 0.5 rad, shoulder locked"))
+                         title="Watflex elbow PD step 0.5 rad, single-link set-up"))
 
 
 if __name__ == "__main__":

@@ -46,3 +46,39 @@ def gauge_strain(beam, x_gauge: float, tip_deflection_m: float) -> float:
     """
     t, L = beam.thickness, beam.length
     return 3.0 * t / (2.0 * L**3) * (x_gauge - L) * tip_deflection_m
+
+
+def clamped_tip_body_frequencies(beam, mass: float, offset: float, n_modes: int = 3) -> np.ndarray:
+    """First `n_modes` natural frequencies (rad/s) of a clamped beam whose free end carries a rigid,
+    massless extension of length `offset` (m) with a point mass `mass` (kg) at its end.
+
+    Euler-Bernoulli, w = A (cos bx - cosh bx) + B (sin bx - sinh bx) (clamped root); the mass moves
+    u = w(L) + e w'(L), so Hamilton's principle gives at x = L: EI w''' = -m w^2 u (shear) and
+    EI w'' = m w^2 e u (moment of the inertia force about the beam end): Blevins' tip-mass case
+    (*Formulas for natural frequency and mode shape*, table 8-1) with the mass offset. In lambda = bL,
+    mu = m / (rho L), eps = e / L: det [[L^2 w'' - mu eps lambda^4 u], [L^3 w''' + mu lambda^4 u]] = 0.
+    `offset` = 0 is clamped_free_frequencies' equation. Rotary inertia of the mass itself is neglected.
+    """
+    mu, eps = mass / (beam.mass_per_length * beam.length), offset / beam.length
+
+    def f(lam: float) -> float:
+        c, s, ch, sh = math.cos(lam), math.sin(lam), math.cosh(lam), math.sinh(lam)
+        # columns: coefficients of A and B in w, L w', L^2 w'', L^3 w''' at x = L
+        w = (c - ch, s - sh)
+        w1 = (lam * (-s - sh), lam * (c - ch))
+        w2 = (lam**2 * (-c - ch), lam**2 * (-s - sh))
+        w3 = (lam**3 * (s - sh), lam**3 * (-c - ch))
+        u = [w[i] + eps * w1[i] for i in range(2)]
+        row1 = [w2[i] - mu * eps * lam**4 * u[i] for i in range(2)]
+        row2 = [w3[i] + mu * lam**4 * u[i] for i in range(2)]
+        return (row1[0] * row2[1] - row1[1] * row2[0]) / (ch * ch * (1.0 + mu * lam**4))  # kept O(1)
+
+    roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
+    values = [f(x) for x in grid]
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if fa * fb < 0:
+            roots.append(brentq(f, a, b, xtol=1e-14))
+            if len(roots) == n_modes:
+                break
+    lam = np.array(roots)
+    return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))

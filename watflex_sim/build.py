@@ -192,6 +192,18 @@ def build_watflex(p: Watflex) -> mujoco.MjSpec:
     return spec
 
 
+def make_single_link(spec: mujoco.MjSpec) -> None:
+    """Turn a Watflex spec into the single-link set-up (rigs.md §2, thesis 5.2.4): link 1's
+    hinges go (a rigid link) and so does the elbow housing's air-bearing slide, its contact made
+    inert (the cross beam to the wall holds the housing), so the elbow drives link 2 and the end
+    effector, still on its own air bearing, from a fixed base. The shoulder hinge is the caller's
+    to lock (model.load_model)."""
+    for joint in [j for j in spec.joints if j.name.startswith("link1_j") or j.name == "elbow_float"]:
+        spec.delete(joint)
+    bearing = spec.geom("elbow_bearing")
+    bearing.contype = bearing.conaffinity = 0  # kept (named) so an effect on it is a no-op, not an error
+
+
 def build_emps(p: Emps) -> mujoco.MjSpec:
     """EMPS: a carriage of mass M on a slide `carriage` (x, m) with viscous friction, driven by force."""
     spec = _spec("emps", p.timestep)

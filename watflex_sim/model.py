@@ -8,7 +8,7 @@ from typing import Callable, Sequence
 
 import mujoco
 
-from .build import BUILDERS
+from .build import BUILDERS, make_single_link
 from .params import GRAVITY, RIGS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -66,6 +66,7 @@ def load_model(
     actuator_bench: str = "",
     edits: Sequence[Callable[[mujoco.MjSpec], None]] = (),
     n_segments: int = 0,
+    single_link: bool = True,
 ) -> mujoco.MjModel:
     """Compile `rig` with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
 
@@ -76,9 +77,13 @@ def load_model(
     identified inertia (armature) and clamps only; the other joints are locked at 0.
     `edits` change the spec first (effects and refit parameters, effects.Patch). `n_segments`
     (0: the committed model's) rebuilds the flexible parts with that many segments each.
+    A Watflex lock on the shoulder is the single-link set-up of rigs.md §2 (link 1 rigid, elbow
+    housing fixed: build.make_single_link); `single_link=False` locks the hinge alone and keeps
+    link 1 flexible under the elbow on its air bearing (a different rig, for model tests).
     Raises ConfigError for a negative payload, an unknown joint, a bad timestep or segment count.
     """
-    spec = nominal_spec(rig) if not n_segments else BUILDERS[rig](segmented(rig, n_segments))
+    params = segmented(rig, n_segments)
+    spec = nominal_spec(rig) if not n_segments else BUILDERS[rig](params)
     for edit in edits:
         edit(spec)
     if actuator_bench:
@@ -111,6 +116,8 @@ def load_model(
         body.quat = [math.cos(angle / 2), 0, 0, math.sin(angle / 2)]
         for act in [a for a in spec.actuators if a.target == name]:
             spec.delete(act)
+    if single_link and getattr(params, "single_link", None) and params.single_link(locked_joints):
+        make_single_link(spec)
     if timestep is not None:
         if timestep <= 0:
             raise ConfigError(f"timestep must be > 0 s, got {timestep}")

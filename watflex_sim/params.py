@@ -187,6 +187,21 @@ class Watflex:
     bearing_timeconst: float = 0.01  # s, contact solref time constant [ours]
     n_segments: int = 12  # per link [ours] README "Discretisation": 3 modes within 1 % even bare
     timestep: float = 5e-4  # s [ours] README "Time step"
+    # Single-link set-up, rigs.md §2 (thesis 5.2.4: "the shoulder motor had to be fixed ... by
+    # mounting a rigid link between shoulder and elbow actuator and a cross beam to the wall"):
+    # a scenario or recording whose locked_joints name this joint is that set-up.
+    single_link_lock: str = "shoulder"
+
+    def single_link(self, locked_joints) -> bool:
+        """True if `locked_joints` (joint -> rad) describe the single-link set-up (rigs.md §2)."""
+        return self.single_link_lock in (locked_joints or {})
+
+    def unmounted_channels(self, locked_joints) -> tuple[str, ...]:
+        """Channels with no sensor in the set-up `locked_joints` describe: in the single-link set-up
+        flexible link 1 is not mounted, so neither are its strain bridges (strain_1A/1B/1C)."""
+        if not self.single_link(locked_joints):
+            return ()
+        return tuple(f"strain_{name}" for name, (link, _x, _k) in self.gauges.items() if link == 1)
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ import copy
 import csv
 import io
 import json
+import logging
 import math
 import os
 import re
@@ -20,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .params import RIGS
 from .rigdesc import channel_units
 
 FORMAT = "flexarm-recording/1"
@@ -145,6 +147,19 @@ def validate(rec: Recording, source: str = "recording") -> Recording:
     return Recording(time, chans, rec.meta)
 
 
+def _mounted(chans: dict, meta: dict, source) -> dict:
+    """`chans` without the channels no sensor gives in the recording's set-up: link 1's strain
+    bridges in the Watflex single-link set-up (locked_joints naming the shoulder, rigs.md §2)."""
+    params, locked = RIGS.get(meta.get("rig")), meta.get("locked_joints")
+    if not hasattr(params, "unmounted_channels") or not isinstance(locked, dict):
+        return chans
+    absent = [n for n in params.unmounted_channels(locked) if n in chans]
+    if absent:
+        logging.getLogger(__name__).warning("%s: %s left out: not mounted in the single-link set-up "
+                                            "(rigs.md §2)", source, ", ".join(absent))
+    return {n: x for n, x in chans.items() if n not in absent}
+
+
 def _csv_text(rec: Recording) -> str:
     """CSV text: header ``time,<channels>``, ``.10g`` numbers, NaN as an empty cell."""
     cols = [rec.time.tolist()] + [x.tolist() for x in rec.channels.values()]
@@ -168,6 +183,7 @@ def write_recording(rec: Recording, directory, name: str) -> Path:
         raise RecordingError(directory, f"bad recording name {_show(name)}")
     csv_path, json_path = directory / f"{name}.csv", directory / f"{name}.json"
     rec = validate(rec, str(csv_path))
+    rec = Recording(rec.time, _mounted(rec.channels, rec.meta, csv_path), rec.meta)
     meta = {"format": FORMAT, **rec.meta}
     try:
         sidecar = json.dumps(meta, indent=2, sort_keys=True) + "\n"
@@ -363,6 +379,7 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
     else:
         time, chans, where, scalars = _read_mat(raw, rig, source)
         meta = _fill_scalars(meta, scalars, source)
+    chans = _mounted(chans, meta, source)
     _check_samples(time, chans, source, where)
     return Recording(time, chans, meta)
 

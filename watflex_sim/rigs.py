@@ -154,6 +154,8 @@ class WatflexRig(Rig):
     def __init__(self, model, data, params: Watflex, noise: bool, seed: int, locked: dict[str, float] | None = None):
         super().__init__(model, data, params, noise, seed)
         locked = locked or {}
+        unmounted = params.unmounted_channels(locked)  # link 1's bridges in the single-link set-up
+        self.channels = tuple(c for c in WatflexRig.channels if c not in unmounted)
         self._joint_q = {j: self._qpos(j) for j in self.joints}
         self._locked = {j: float(locked.get(j, 0.0)) for j in self.joints}
         self._motor = {j: model.actuator(f"{j}_motor").id for j in self.joints if self._joint_q[j] is not None}
@@ -168,8 +170,8 @@ class WatflexRig(Rig):
         self._gauges = []
         for name, (link, x_gauge, k_bridge) in params.gauges.items():
             qa, qb, wa, wb, thickness = self._gauge_weights(link, x_gauge)
-            if qa is None or qb is None:  # the link is not in the model (actuator bench)
-                continue
+            if f"strain_{name}" in unmounted or qa is None or qb is None:  # not mounted, or the link
+                continue  # is not in the model (actuator bench)
             volts = -0.5 * thickness / k_bridge
             self._gauges.append((f"strain_{name}", qa, qb, volts * wa, volts * wb))
         self._adc_step = 2 * params.strain_adc_range / 4096
