@@ -49,6 +49,7 @@ class Data:
     noise: list[dict[str, float]]  # per recording: channel -> noise rms (its unit)
     train: list[np.ndarray]  # per recording: boolean mask of training samples
     how: str = ""
+    idle: frozenset = frozenset()  # rig parameters these recordings do not depend on (not refit)
 
     @property
     def noise_floor(self) -> list[dict[str, float]]:

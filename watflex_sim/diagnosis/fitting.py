@@ -67,8 +67,10 @@ def value_of(model: Model, slot: Slot) -> float:
 
 
 def rig_slots(data: Data) -> list[Slot]:
-    """The rig's refit parameters as slots: ratios within 1 +- tolerance (rigs.md section 4)."""
-    return [Slot(("param", n), 1 - p["tolerance"], 1 + p["tolerance"]) for n, p in data.rig.parameters.items()]
+    """The rig's refit parameters as slots: ratios within 1 +- tolerance (rigs.md section 4), but those
+    the recordings do not depend on (`data.idle`: a locked joint's, a link not mounted)."""
+    return [Slot(("param", n), 1 - p["tolerance"], 1 + p["tolerance"]) for n, p in data.rig.parameters.items()
+            if n not in data.idle]
 
 
 def _fd_step(slot: Slot, u: float) -> float:

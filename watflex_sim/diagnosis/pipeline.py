@@ -115,6 +115,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
     at = np.array([value_of(nominal, s) for s in free])
     rig_columns = jacobian(evaluate, nominal, free, at, r_nominal)
+    data.idle = frozenset(s.name for s, column in zip(free, rig_columns.T) if not np.any(column))
+    live = [i for i, s in enumerate(free) if s.name not in data.idle]
+    free, at, rig_columns = [free[i] for i in live], at[live], rig_columns[:, live]
     current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal, noise_cost(data))[0] if free else nominal
     sims = runner.simulate(current)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
@@ -146,7 +149,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
-        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS) for c in top])
+        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [_gains(r, train["noise_ratio"], held["noise_ratio"]) for r in results if "error" not in r]
         if not fitted:
@@ -215,6 +218,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "held_out": {"before": fit_scores(data, sims_nominal, "held_out"), "after": held_f, "how": data.how},
         "refit_parameters": {n: current.parameters[n] for n in current.parameters},
         "parameters_at_bounds": at_bounds(data, current if current.parameters else refit_model),
+        "parameters_not_refit": sorted(data.idle),  # the recordings do not depend on them
         "noise_nrmse": noise_nrmse(data),
         "noise": {"margin": NOISE_MARGIN, "training_ratio": train_f["noise_ratio"], "validation_ratio": held_f["noise_ratio"],
                   "per_channel": _noise_table(data)},

@@ -264,8 +264,9 @@ def fit_candidate(args) -> dict:
     """Fit one candidate on top of `base` together with the rig's parameters (worker process):
     start at its linear estimate, Jacobian columns of the rig's parameters from the signatures,
     of its own parameters by finite differences there; return its scores."""
-    base, cand, rig_columns, iters = args
+    base, cand, rig_columns, iters, idle = args
     data = held()
+    data.idle = idle  # this worker's copy of the data learns which rig parameters are idle
     evaluate = evaluator(None)
     values = step_search(evaluate, cand, base)
     trial = cand.model(base, values)
