@@ -44,8 +44,8 @@ def rigdir(tmp_path, monkeypatch):
 
 
 def test_folder_rig_runs_and_is_diagnosed_from_the_command_line(rigdir, tmp_path, capsys):
-    """Simulated with --rig PATH, the folder rig gives exactly the bundled EMPS rig's recording (same
-    model, sensors, controller, seed); its recording's sidecar says "myrig", and the diagnosis of it
+    """Simulated with --rig PATH, the folder rig gives the bundled EMPS rig's recording to the CSV's 10
+    digits (same model, sensors, controller, seed); its sidecar says "myrig", and the diagnosis of it
     with --rig PATH (two worker processes) finds the Coulomb friction put in (20 N) within 10 %."""
     scenario = tmp_path / "moves.toml"
     scenario.write_text(SCENARIO.format(effects=FRICTION))
