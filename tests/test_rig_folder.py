@@ -110,3 +110,18 @@ def test_bad_rig_file_is_one_line_naming_file_and_key(what, tmp_path, monkeypatc
     assert len(err) == 1 and str(folder / "rig.toml") in err[0], err
     assert all(w in err[0] for w in words), err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_rig_loaded_by_path_resolves_by_name_in_a_fresh_process(rigdir):
+    """use_rig(PATH) (what --rig PATH does) reaches processes that share no memory with this one
+    (spawned or forkserver workers): the name resolves to the same file there."""
+    import subprocess
+    import sys
+
+    from watflex_sim.rigdesc import use_rig
+
+    source = use_rig(str(rigdir)).source
+    child = subprocess.run([sys.executable, "-c", "from watflex_sim.rigdesc import load_rig; print(load_rig('myrig').source)"],
+                           capture_output=True, text=True, timeout=120)
+    assert child.returncode == 0, child.stderr
+    assert child.stdout.strip() == source == str(rigdir / "rig.toml")

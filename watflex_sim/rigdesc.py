@@ -21,6 +21,7 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
+from itertools import chain
 from pathlib import Path
 
 import mujoco
@@ -193,14 +194,15 @@ def _version(path: Path) -> int:
         return 0
 
 
-def _candidates(entry: Path) -> list[Path]:
+def _candidates(entry: Path):
     """Rig files an entry of WATFLEX_RIGS offers: the file itself, or a folder's rig.toml, *.toml, */rig.toml."""
     if entry.is_file():
-        return [entry]
-    if not entry.is_dir():
-        return []
-    own = [entry / "rig.toml"] if (entry / "rig.toml").is_file() else []
-    return own + sorted(p for p in entry.glob("*.toml") if p.name != "rig.toml") + sorted(entry.glob("*/rig.toml"))
+        yield entry
+    elif entry.is_dir():
+        if (entry / "rig.toml").is_file():
+            yield entry / "rig.toml"
+        yield from sorted(p for p in entry.glob("*.toml") if p.name != "rig.toml")
+        yield from sorted(entry.glob("*/rig.toml"))
 
 
 def _search_path() -> list[Path]:
@@ -211,7 +213,7 @@ def rig_file(name: str) -> Path:
     """The file of rig `name` (WATFLEX_RIGS, then the bundled rigs); ConfigError if none."""
     for entry in _search_path():
         quick = [entry / f"{name}.toml", entry / name / "rig.toml"] if entry.is_dir() else []
-        for path in quick + _candidates(entry):
+        for path in chain(quick, _candidates(entry)):  # the folder is listed only if the quick look fails
             if path.is_file() and _name_of(str(path), _version(path)) == name:
                 return path
     bundled = RIGS_DIR / f"{name}.toml"
