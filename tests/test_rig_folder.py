@@ -1,6 +1,7 @@
 """A rig is a folder a user owns (issue 15, item 1): rig.toml + its MJCF model anywhere on disk,
 found by --rig PATH or WATFLEX_RIGS, with no line of code naming it; bad rig files are one line, exit 2."""
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -67,13 +68,17 @@ def test_folder_rig_runs_and_is_diagnosed_from_the_command_line(rigdir, tmp_path
     assert found["held_out"]["after"]["nrmse"] < found["held_out"]["before"]["nrmse"]
 
 
-def test_rig_library_from_watflex_rigs(tmp_path, monkeypatch):
-    """WATFLEX_RIGS names folders of rigs; a rig is found by its `name`, whatever its folder is called."""
+def test_rig_library_from_watflex_rigs(tmp_path, monkeypatch, capsys):
+    """WATFLEX_RIGS names folders of rigs; a rig is found by its `name`, whatever its folder is called;
+    other TOML files there (a scenario) are not rigs."""
     make_rig(tmp_path / "library" / "myrig-v2")
-    monkeypatch.setenv("WATFLEX_RIGS", str(tmp_path / "nothing-here") + ":" + str(tmp_path / "library"))
+    (tmp_path / "library" / "moves.toml").write_text(SCENARIO.format(effects=""))
+    monkeypatch.setenv("WATFLEX_RIGS", os.pathsep.join([str(tmp_path / "nothing-here"), str(tmp_path / "library")]))
     rig = load_rig("myrig")
     assert rig.name == "myrig" and rig.model_path == tmp_path / "library" / "myrig-v2" / "myrig.xml"
-    assert {"myrig", "emps", "laser_arm", "watflex"} <= set(known_rigs())
+    assert {"myrig", "emps", "laser_arm", "watflex"} <= set(known_rigs()) and "moves" not in known_rigs()
+    assert main(["list", "--rigs"]) == 0
+    assert f"myrig  {tmp_path / 'library' / 'myrig-v2' / 'rig.toml'}" in capsys.readouterr().out.splitlines()
     assert load_rig("emps").source == str((ROOT / "rigs" / "emps.toml").resolve())  # bundled rigs still there
 
 

@@ -130,7 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--no-plot", action="store_true", help="do not write DIR/summary.png")
     batch.add_argument("--rig", help=RIG_HELP + "; the sweep's scenario may name it")
 
-    sub.add_parser("list", help="list the scenarios shipped in scenarios/")
+    listing = sub.add_parser("list", help="list the scenarios shipped in scenarios/ (--rigs: the rigs found)")
+    listing.add_argument("--rigs", action="store_true", help="list the rigs instead: WATFLEX_RIGS's, then the bundled ones, with their files")
     return parser
 
 
@@ -249,6 +250,12 @@ def cmd_batch(args) -> int:
 
 
 def cmd_list(args) -> int:
+    if args.rigs:
+        from .rigdesc import known_rigs, rig_file
+
+        for name in known_rigs():
+            print(f"{name}  {rig_file(name)}")
+        return 0
     for name in available():
         print(name)
     return 0

@@ -177,14 +177,17 @@ def _load(path: str, mtime_ns: int) -> RigDescription:
 
 @cache
 def _name_of(path: str, mtime_ns: int) -> str:
-    """The `name` a rig file declares; the folder (rig.toml) or file stem if it declares none or is unreadable."""
+    """The `name` a rig file declares; the folder (rig.toml) or file stem if it declares none or is
+    unreadable (load_rig then says why); "" for a TOML file with neither `model` nor `sensors` (not a rig)."""
     p = Path(path)
     default = p.parent.name if p.name == "rig.toml" else p.stem
     try:
-        name = tomllib.loads(p.read_text()).get("name", default)
+        raw = tomllib.loads(p.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return default
-    return name if isinstance(name, str) else default
+    if "model" not in raw and "sensors" not in raw:
+        return ""
+    return raw["name"] if isinstance(raw.get("name"), str) else default
 
 
 def _version(path: Path) -> int:
@@ -256,7 +259,7 @@ def use_rig(name_or_path: str) -> RigDescription:
 
 def known_rigs() -> list[str]:
     """Names of the rigs found: WATFLEX_RIGS's and the bundled ones."""
-    names = {_name_of(str(p), _version(p)) for e in _search_path() for p in _candidates(e)}
+    names = {_name_of(str(p), _version(p)) for e in _search_path() for p in _candidates(e)} - {""}
     return sorted(names | {p.stem for p in RIGS_DIR.glob("*.toml")})
 
 
