@@ -214,6 +214,8 @@ def _search_path() -> list[Path]:
 
 def rig_file(name: str) -> Path:
     """The file of rig `name` (WATFLEX_RIGS, then the bundled rigs); ConfigError if none."""
+    if not name or _is_path(name) or name.startswith("."):
+        raise ConfigError(f"a rig name is a plain name (a path goes to --rig), got {name!r}")
     for entry in _search_path():
         quick = [entry / f"{name}.toml", entry / name / "rig.toml"] if entry.is_dir() else []
         for path in chain(quick, _candidates(entry)):  # the folder is listed only if the quick look fails
