@@ -46,7 +46,7 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rig", help=RIG_HELP + "; the scenario runs on it")
 
 
-RIG_HELP = "a rig: a bundled name, a rig folder (rig.toml + model) or a .toml file anywhere (README 'Rigs')"
+RIG_HELP = "a rig: a bundled name, a rig folder (rig.toml + model) or a .toml file anywhere (docs/rigs.md)"
 
 
 def _scenario(args) -> dict:
