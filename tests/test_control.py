@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controllers import PDJoint, PDTip
-from controllers.filters import Butterworth2
+from watflex_sim.controllers import PDJoint, PDTip
+from watflex_sim.controllers.filters import Butterworth2
 from watflex_sim.model import ConfigError
 from watflex_sim.params import WATFLEX
 from watflex_sim.scenario import load_scenario

@@ -1,6 +1,6 @@
 """The diagnosis command: bad input, rigs as data, and the EMPS real-data benchmark.
 
-EMPS reference figures: Janot et al. 2019 (shared/realdata/emps/ABOUT.md): inverse model
+EMPS reference figures: Janot et al. 2019 (tests/data/emps/ABOUT.md): inverse model
 tau = M qdd + Fv qd + Fc sign(qd) + offset with M = 95.1089 kg, Fv = 203.5034 N s/m,
 Fc = 20.3935 N, offset = -3.1648 N (IDIM-LS). Our actuator_offset is added to the drive
 command in the plant (V), so offset_N = -offset_V x gtau.
@@ -18,7 +18,7 @@ from watflex_sim.recording import read_recording
 from watflex_sim.resim import resimulate
 from watflex_sim.rigdesc import known_rigs, load_rig
 
-EMPS_DIR = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "emps"
+EMPS_DIR = Path(__file__).resolve().parent / "data" / "emps"  # copy of shared/realdata/emps (ABOUT.md: source, licence)
 GTAU = 35.15065188  # N/V, the data files' gtau
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from dm_control.rl import control
 
-from controllers import PDTip
+from watflex_sim.controllers import PDTip
 from watflex_sim import dmc, load_scenario, simulate
 from watflex_sim.model import ConfigError
 from watflex_sim.params import LASER_ARM, WATFLEX

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from controllers import PDJoint
-from controllers.friction_compensation import FrictionCompensation, wrap_compensation
+from watflex_sim.controllers import PDJoint
+from watflex_sim.controllers.friction_compensation import FrictionCompensation, wrap_compensation
 from watflex_sim import load_scenario
 from watflex_sim.engine import ControlLoop
 from watflex_sim.friction import slope_limited

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.pi_velocity import PIVelocity, log_scan
+from watflex_sim.controllers.pi_velocity import PIVelocity, log_scan
 
 ROOT = Path(__file__).resolve().parent.parent
 _spec = importlib.util.spec_from_file_location("friction_experiments", ROOT / "tools" / "friction_experiments.py")

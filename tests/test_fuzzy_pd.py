@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers import CONTROLLERS
-from controllers.fuzzy_pd import RULES, FuzzyPD, memberships
+from watflex_sim.controllers import CONTROLLERS
+from watflex_sim.controllers.fuzzy_pd import RULES, FuzzyPD, memberships
 from watflex_sim import ConfigError, run_scenario
 from watflex_sim.metrics import step_metrics
 from watflex_sim.params import LASER_ARM

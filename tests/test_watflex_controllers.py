@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import CONTROLLERS
-from controllers.observer import ObserverJoint, acker, flexible_model, thesis_gains
-from controllers.trajectory import CubicTrajectory, MoveSequence
+from watflex_sim.controllers import CONTROLLERS
+from watflex_sim.controllers.observer import ObserverJoint, acker, flexible_model, thesis_gains
+from watflex_sim.controllers.trajectory import CubicTrajectory, MoveSequence
 from watflex_sim.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -145,7 +145,7 @@ def test_passivity_loop_is_stable_below_the_models_mu_bound():
 def test_passivity_law_is_eq_5_1():
     """One evaluation by hand: tau = -J^T [K_d rho_mu' + K_p (rho_mu - rho_d)], rho_mu = (1 - mu)
     rho_r + mu rho_f, from the first samples (filters start at rest, rate 0)."""
-    from controllers.passivity import STRAINS, Passivity
+    from watflex_sim.controllers.passivity import STRAINS, Passivity
     from watflex_sim.endpoint import EndpointEstimator
 
     est = EndpointEstimator()

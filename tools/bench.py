@@ -466,7 +466,7 @@ def bench_batch(args) -> str:
     sweep = batch.load_sweep(tmp / "sweep.toml")
     scenarios = [batch.resolve(sweep, values) for values in batch.points(sweep)]
 
-    bare_loop = ("import json, sys, time\nimport controllers\nfrom watflex_sim import check, simulate\n"
+    bare_loop = ("import json, sys, time\nimport watflex_sim.controllers\nfrom watflex_sim import check, simulate\n"
                  "scenarios = json.load(sys.stdin)\nt0 = time.perf_counter()\n"
                  "for s in scenarios:\n    simulate(check(s))\nprint(time.perf_counter() - t0)\n")
 

@@ -180,7 +180,7 @@ def friction_map(quick: bool = False, scan: dict | None = None) -> dict:
     def edit(s):
         if scan is not None:
             s["controller"]["scan"] = dict(scan)
-        from controllers import CONTROLLERS
+        from watflex_sim.controllers import CONTROLLERS
 
         spec = {k: v for k, v in s["controller"].items() if k != "type"}
         s["duration_s"] = CONTROLLERS["pi_velocity"](**spec).duration_s

@@ -38,8 +38,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from controllers import PDJoint  # noqa: E402
-from controllers.passivity import compensated  # noqa: E402
+from watflex_sim.controllers import PDJoint  # noqa: E402
+from watflex_sim.controllers.passivity import compensated  # noqa: E402
 from watflex_sim.plot import save_figure  # noqa: E402
 from watflex_sim import metrics  # noqa: E402
 from watflex_sim.endpoint import EndpointEstimator  # noqa: E402

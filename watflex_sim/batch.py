@@ -328,7 +328,7 @@ def run_pool(tasks: Iterator[dict], workers: int, on_row: Callable[[dict], None]
     forkserver = "forkserver" in mp.get_all_start_methods()  # workers forked from a clean, preloaded process
     ctx = mp.get_context("forkserver" if forkserver else "spawn")
     if forkserver:
-        ctx.set_forkserver_preload(["watflex_sim.batch", "controllers"])
+        ctx.set_forkserver_preload(["watflex_sim.batch", "watflex_sim.controllers"])
     procs: dict = {}  # parent end of the pipe -> [process, task or None]
 
     def start() -> None:

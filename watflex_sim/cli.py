@@ -43,6 +43,36 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
         help="override a scenario parameter, e.g. --set payload_kg=0.7 (kg) --set direction=negative "
         "--set controller.kp=0.2 --set seed=3 --set noise=false; repeatable",
     )
+    p.add_argument("--rig", help=RIG_HELP + "; the scenario runs on it")
+
+
+RIG_HELP = "a rig: a bundled name, a rig folder (rig.toml + model) or a .toml file anywhere (docs/rigs.md)"
+
+
+def _scenario(args) -> dict:
+    """The scenario with --set overrides, on the --rig rig if one is given (loaded first, by path or name)."""
+    overrides = list(args.overrides)
+    if args.rig:
+        overrides.insert(0, f"rig={json.dumps(_loaded_rig(args.rig).name)}")
+    return load_scenario(args.scenario, overrides)
+
+
+def _loaded_rig(rig: str | None):
+    """The --rig description (loaded by path or name, so its name resolves everywhere), or None."""
+    if not rig:
+        return None
+    from .rigdesc import use_rig
+
+    return use_rig(rig)
+
+
+def _read(path: Path, rig) -> Recording:
+    """A recording with its own NAME.json, or else with the --rig rig's default [sidecar]."""
+    if path.with_suffix(".json").exists() or rig is None:
+        return read_recording(path)
+    if rig.sidecar is None:
+        raise ConfigError(f"{path}: no {path.with_suffix('.json').name} and {rig.source} has no [sidecar] table")
+    return read_recording(path, sidecar={"rig": rig.name, **rig.sidecar})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,6 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--png", type=Path, help="PNG path (default NAME.png beside the recording)")
     plot.add_argument("--rrd", type=Path, help="also write a rerun recording here")
     plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
+    plot.add_argument("--rig", help=RIG_HELP + "; its default sidecar serves a file that comes without one")
 
     diag = sub.add_parser(
         "diagnose", help="find where recordings and the model differ, name the missing physics, fit it",
@@ -80,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
         "what improves held-out data. Writes DIR/report.json, fit_*.png, diagnosis.rrd, patched_model.xml, patch.json.")
     diag.add_argument("recordings", nargs="+", type=Path, help="NAME.csv or NAME.mat, each with NAME.json beside it")
     diag.add_argument("--report", required=True, type=Path, help="output directory (created)")
-    diag.add_argument("--rig", help="rig whose default sidecar (rigs/RIG.toml) serves files that come without one, e.g. emps")
+    diag.add_argument("--rig", help=RIG_HELP + "; its default sidecar serves files that come without one, e.g. emps")
     diag.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes fitting candidates (default: all cores)")
     diag.add_argument("--max-effects", type=int, default=2, help="findings at most (default 2)")
     diag.add_argument("--no-rrd", action="store_true", help="do not write diagnosis.rrd")
@@ -97,8 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "(start one here) or HOST:PORT; needs pip install 'watflex-sim[cluster]'")
     batch.add_argument("--keep-recordings", action="store_true", help="write each run's recording to DIR/recordings/RUN_ID.csv/.json")
     batch.add_argument("--no-plot", action="store_true", help="do not write DIR/summary.png")
+    batch.add_argument("--rig", help=RIG_HELP + "; the sweep's scenario may name it")
 
-    sub.add_parser("list", help="list the scenarios shipped in scenarios/")
+    listing = sub.add_parser("list", help="list the scenarios shipped in scenarios/ (--rigs: the rigs found)")
+    listing.add_argument("--rigs", action="store_true", help="list the rigs instead: WATFLEX_RIGS's, then the bundled ones, with their files")
     return parser
 
 
@@ -110,7 +143,7 @@ def _log_rerun(rec: Recording, rrd: Path | None, spawn: bool, frames=None, frame
 
 
 def cmd_run(args) -> int:
-    scenario = load_scenario(args.scenario, args.overrides)
+    scenario = _scenario(args)
     if args.patch:
         try:
             patch = json.loads(args.patch.read_text())
@@ -145,14 +178,14 @@ def cmd_view(args) -> int:
         return EXIT_BAD_INPUT
     from .viewer import view
 
-    view(load_scenario(args.scenario, args.overrides))
+    view(_scenario(args))
     return 0
 
 
 def cmd_plot(args) -> int:
     from .plot import plot_recording
 
-    rec = read_recording(args.recording)
+    rec = _read(args.recording, _loaded_rig(args.rig))
     png = args.png or args.recording.with_suffix(".png")
     print(f"wrote {plot_recording(rec, png)}")
     if args.rrd or args.spawn:
@@ -165,17 +198,9 @@ def cmd_plot(args) -> int:
 def cmd_diagnose(args) -> int:
     from .diagnosis import diagnose
     from .report import summary, write_report
-    from .rigdesc import load_rig
 
-    sidecar = None
-    if args.rig:
-        sidecar = load_rig(args.rig).sidecar
-        if sidecar is None:
-            raise ConfigError(f"rig {args.rig!r} has no default sidecar in rigs/{args.rig}.toml")
-    recordings = []
-    for path in args.recordings:
-        own = path.with_suffix(".json")
-        recordings.append(read_recording(path, sidecar=None if own.exists() or sidecar is None else sidecar))
+    rig = _loaded_rig(args.rig)
+    recordings = [_read(path, rig) for path in args.recordings]
     start = time.perf_counter()
     bar = ProgressBar("", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
 
@@ -204,6 +229,7 @@ def cmd_batch(args) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    _loaded_rig(args.rig)
     sweep = load_sweep(args.sweep)
     bar = ProgressBar("batch", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
 
@@ -224,6 +250,12 @@ def cmd_batch(args) -> int:
 
 
 def cmd_list(args) -> int:
+    if args.rigs:
+        from .rigdesc import known_rigs, rig_file
+
+        for name in known_rigs():
+            print(f"{name}  {rig_file(name)}")
+        return 0
     for name in available():
         print(name)
     return 0

@@ -60,7 +60,7 @@ def substeps(control_period: float, timestep: float) -> int:
 
 def make_controller(scenario: dict, rig_name: str):
     """The scenario's controller: a registered closed-loop type, or open loop from its command signals."""
-    from controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
+    from .controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
 
     spec = dict(scenario["controller"])
     kind = spec.pop("type")
@@ -73,7 +73,7 @@ def make_controller(scenario: dict, rig_name: str):
     try:
         controller = CONTROLLERS[kind](**spec)
         if compensation is not None:  # [controller.compensation]: friction compensation around it
-            from controllers.friction_compensation import wrap_compensation
+            from .controllers.friction_compensation import wrap_compensation
 
             controller = wrap_compensation(controller, compensation, rig_params(rig_name))
         return controller

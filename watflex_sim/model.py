@@ -1,4 +1,4 @@
-"""Load a rig's nominal model (`models/<rig>.xml`) with a scenario's payload, locks and tilt."""
+"""Load a rig's nominal model (the MJCF file its description names) with a scenario's payload, locks and tilt."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +11,10 @@ import mujoco
 from .build import BUILDERS, make_single_link
 from .params import GRAVITY, RIGS
 
-ROOT = Path(__file__).resolve().parent.parent
+_PACKAGE = Path(__file__).resolve().parent
+# The folder holding models/, rigs/, scenarios/, sweeps/: watflex_sim/data/ when installed from a
+# wheel (pyproject.toml maps them there), else the repository beside the package (editable install).
+ROOT = _PACKAGE / "data" if (_PACKAGE / "data" / "rigs").is_dir() else _PACKAGE.parent
 MODELS_DIR = ROOT / "models"
 
 
@@ -33,10 +36,14 @@ def read_toml(path: Path, what: str) -> dict:
 
 
 def rig_params(rig: str):
-    """The parameter set of `rig` ('laser_arm' or 'watflex'); ConfigError if unknown."""
-    if rig not in RIGS:
-        raise ConfigError(f"unknown rig {rig!r} (known: {', '.join(RIGS)})")
-    return RIGS[rig]
+    """The parameter set of `rig` in params.py (laser_arm, watflex, emps); None for a rig described
+    by its file alone (rigdesc: its model is an MJCF file); ConfigError if the rig is unknown."""
+    if rig in RIGS:
+        return RIGS[rig]
+    from .rigdesc import load_rig
+
+    load_rig(rig)
+    return None
 
 
 def segmented(rig: str, n_segments: int):
@@ -50,10 +57,10 @@ def segmented(rig: str, n_segments: int):
 
 
 def nominal_spec(rig: str) -> mujoco.MjSpec:
-    """The committed nominal model of `rig`, or the generator's if the XML is not there."""
-    params = rig_params(rig)
-    path = MODELS_DIR / f"{rig}.xml"
-    return mujoco.MjSpec.from_file(str(path)) if path.exists() else BUILDERS[rig](params)
+    """The nominal model of `rig`: the MJCF file its description names (rigdesc), or the generator's."""
+    from .rigdesc import load_rig
+
+    return load_rig(rig).spec()
 
 
 def load_model(
@@ -82,6 +89,8 @@ def load_model(
     link 1 flexible under the elbow on its air bearing (a different rig, for model tests).
     Raises ConfigError for a negative payload, an unknown joint, a bad timestep or segment count.
     """
+    if n_segments and rig not in BUILDERS:
+        raise ConfigError(f"n_segments: rig {rig!r} has no model generator (its model is an MJCF file)")
     params = segmented(rig, n_segments)
     spec = nominal_spec(rig) if not n_segments else BUILDERS[rig](params)
     for edit in edits:

@@ -1,26 +1,50 @@
-"""Rig descriptions (`rigs/<rig>.toml`): a rig as data, for simulation and diagnosis.
+"""Rig descriptions: a rig as data, for simulation and diagnosis.
 
-A description names the model, the sensor implementation, the channels (unit, kind, noise),
-the default controller, the parameters that may be refit within a tolerance (knobs of
-effects.py) and where each catalogue effect may attach. Adding a rig whose sensors are in
-the library (`generic`: encoders, commands, references, disturbances) needs no code.
+A rig is a TOML file: `rig.toml` in a folder the user owns (or any NAME.toml) naming the model
+(`model`: an MJCF file relative to the rig file, or the name of a bundled model, models/NAME.xml),
+the sensor implementation, the channels (unit, kind, noise), the default controller, the
+parameters that may be refit within a tolerance (knobs of effects.py) and where each catalogue
+effect may attach. A rig whose sensors are in the library (`generic`: encoders, commands,
+references, disturbances) needs no code.
+
+A rig named in a sidecar or scenario (`rig = "myrig"`) is found, first match wins, in
+1. the entries of WATFLEX_RIGS (os.pathsep-separated): a rig file, a rig folder (with rig.toml),
+   or a folder of rigs (NAME.toml files and NAME/rig.toml folders), matched by their `name`;
+2. the bundled rigs (rigs/ in the repository, watflex_sim/data/rigs/ installed).
+`use_rig(PATH)` (the command line's --rig PATH) puts the file first in WATFLEX_RIGS, so worker
+processes (forked, spawned or a forkserver's) resolve names the same way.
 """
 from __future__ import annotations
 
+import os
+import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
+from itertools import chain
+from pathlib import Path
+
+import mujoco
 
 from .model import ROOT, ConfigError, read_toml
 
-RIGS_DIR = ROOT / "rigs"
+RIGS_DIR = ROOT / "rigs"  # the bundled rigs
+ENV = "WATFLEX_RIGS"
 KINDS = ("reference", "measured", "command", "disturbance")
 SENSORS = ("laser_arm", "watflex", "generic")
+# SI units a channel may carry (recordings.md section 1); "1" for a dimensionless channel.
+UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "1")
+# Controller-table keys whose (string or list-of-string) values name channels of the rig.
+CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "measured", "output",
+                 "channel", "channels", "states", "inputs", "outputs")
+KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
+        "mat_scalars", "sidecar", "description")
 
 
 @dataclass(frozen=True)
 class RigDescription:
     name: str
-    model: str  # models/<model>.xml
+    model: str  # MJCF file relative to `source`, or a bundled model's name (models/<model>.xml)
     sensors: str  # laser_arm | watflex | generic
     channels: dict  # channel -> {unit, kind, noise?, joint?, actuator?, gain?, limit?, step?}
     controller: dict  # default controller table
@@ -30,6 +54,7 @@ class RigDescription:
     mat_scalars: tuple = ()  # 1x1 .mat variables kept for the sidecar ("mat:NAME")
     sidecar: dict | None = None  # default sidecar for files that come without one (--rig)
     description: str = ""
+    source: str = ""  # the rig file
 
     def units(self) -> dict[str, str]:
         return {c: spec["unit"] for c, spec in self.channels.items()}
@@ -41,53 +66,227 @@ class RigDescription:
         """name -> (knob, target), for effects.apply_parameters."""
         return {n: (p["knob"], p["target"]) for n, p in self.parameters.items()}
 
+    @property
+    def model_path(self) -> Path:
+        """The model's MJCF file: `model` relative to the rig file, or models/<model>.xml for a bare name."""
+        if self.model.endswith(".xml") or "/" in self.model or os.sep in self.model:
+            return Path(self.source).parent / self.model
+        return ROOT / "models" / f"{self.model}.xml"
 
-def _check(raw: dict, source: str) -> RigDescription:
+    def spec(self) -> mujoco.MjSpec:
+        """The nominal model: the MJCF file, or the generator's (build.py) for a bundled model not on disk."""
+        path = self.model_path
+        if path.is_file():
+            try:
+                return mujoco.MjSpec.from_file(str(path))
+            except ValueError as exc:
+                raise ConfigError(f"{path}: not a MuJoCo model ({exc})".replace("\n", " ")) from None
+        from .build import BUILDERS
+        from .params import RIGS
+
+        if self.model in BUILDERS and self.model in RIGS:
+            return BUILDERS[self.model](RIGS[self.model])
+        raise ConfigError(f"{self.source}: model: no file {path}")
+
+
+def _check(raw: dict, source: str, default_name: str) -> RigDescription:
+    from .controllers import CONTROLLERS
     from .effects import CATALOGUE, KNOBS
 
     def fail(why: str):
         raise ConfigError(f"{source}: {why}")
 
-    for key in ("name", "model", "sensors", "channels"):
+    if set(raw) - set(KEYS):
+        fail(f"unknown key(s) {', '.join(sorted(set(raw) - set(KEYS)))} (known: {', '.join(KEYS)})")
+    for key in ("model", "sensors", "channels"):
         if key not in raw:
             fail(f"missing {key!r}")
+    if not isinstance(raw.get("name", default_name), str) or not isinstance(raw["model"], str):
+        fail("name and model must be strings")
     if raw["sensors"] not in SENSORS:
         fail(f"sensors must be one of {', '.join(SENSORS)}, got {raw['sensors']!r}")
+    if not isinstance(raw["channels"], dict) or not raw["channels"]:
+        fail("channels must be a table channel = {unit, kind, ...}")
     for channel, spec in raw["channels"].items():
         if not isinstance(spec, dict) or "unit" not in spec or spec.get("kind") not in KINDS:
             fail(f"channel {channel!r} needs a unit and a kind among {', '.join(KINDS)}")
+        if spec["unit"] not in UNITS:
+            fail(f"channel {channel!r}: unit {spec['unit']!r} is not one of {', '.join(UNITS)}")
     for name, spec in raw.get("parameters", {}).items():
-        if spec.get("knob") not in KNOBS or "target" not in spec or not 0 < spec.get("tolerance", -1) < 1:
+        if not isinstance(spec, dict) or spec.get("knob") not in KNOBS or "target" not in spec \
+                or not 0 < spec.get("tolerance", -1) < 1:
             fail(f"parameter {name!r} needs knob (one of {', '.join(KNOBS)}), target and 0 < tolerance < 1")
     for effect, places in raw.get("effects", {}).items():
         if effect not in CATALOGUE or not isinstance(places, list):
             fail(f"effects: {effect!r} is not a catalogue effect with a list of places")
-    known = {"name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
-             "mat_scalars", "sidecar", "description"}
-    if set(raw) - known:
-        fail(f"unknown key(s) {', '.join(sorted(set(raw) - known))}")
-    return RigDescription(
-        name=raw["name"], model=raw["model"], sensors=raw["sensors"], channels=raw["channels"],
-        controller=raw.get("controller", {"type": "none"}), parameters=raw.get("parameters", {}),
+    tables = {"controller": raw.get("controller", {"type": "none"})}
+    if isinstance(raw.get("sidecar"), dict) and "controller" in raw["sidecar"]:
+        tables["sidecar.controller"] = raw["sidecar"]["controller"]
+    for where, table in tables.items():
+        if not isinstance(table, dict) or table.get("type") not in ("none", "open_loop", *CONTROLLERS):
+            fail(f"{where}: type must be one of none, open_loop, {', '.join(CONTROLLERS)}, "
+                 f"got {table.get('type') if isinstance(table, dict) else table!r}")
+        for role in CHANNEL_ROLES:
+            value = table.get(role)
+            for name in [value] if isinstance(value, str) else value if isinstance(value, list) else []:
+                if raw["sensors"] == "generic" and name not in raw["channels"]:
+                    fail(f"{where}.{role}: unknown channel {name!r} (channels: {', '.join(raw['channels'])})")
+    description = RigDescription(
+        name=raw.get("name", default_name), model=raw["model"], sensors=raw["sensors"], channels=raw["channels"],
+        controller=tables["controller"], parameters=raw.get("parameters", {}),
         effects=raw.get("effects", {}), time_variable=raw.get("time_variable", "time"),
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
-        description=raw.get("description", ""),
+        description=raw.get("description", ""), source=source,
     )
+    if description.sensors == "generic":
+        _check_model(description, fail)
+    return description
+
+
+def _check_model(description: RigDescription, fail) -> None:
+    """The generic sensors' joints and actuators exist in the model; joint angles in rad, slides in m."""
+    try:
+        model = description.spec().compile()
+    except ConfigError:
+        raise
+    except ValueError as exc:
+        fail(f"model {description.model_path}: does not compile ({exc})".replace("\n", " "))
+    expected = {int(mujoco.mjtJoint.mjJNT_HINGE): "rad", int(mujoco.mjtJoint.mjJNT_SLIDE): "m"}
+    for channel, spec in description.channels.items():
+        for key, kind in (("joint", mujoco.mjtObj.mjOBJ_JOINT), ("actuator", mujoco.mjtObj.mjOBJ_ACTUATOR)):
+            if key in spec and mujoco.mj_name2id(model, kind, str(spec[key])) < 0:
+                fail(f"channel {channel!r}: {key} {spec[key]!r} is not in the model {description.model_path.name}")
+        if spec["kind"] == "measured" and "joint" in spec and set(spec) <= {"unit", "kind", "joint", "noise", "step"}:
+            unit = expected.get(int(model.jnt_type[model.joint(spec["joint"]).id]))
+            if unit and spec["unit"] != unit:
+                fail(f"channel {channel!r}: unit {spec['unit']!r} for the position of joint {spec['joint']!r}, "
+                     f"which is measured in {unit}")
 
 
 @cache
+def _load(path: str, mtime_ns: int) -> RigDescription:
+    """A rig file, checked (cached per file version)."""
+    p = Path(path)
+    default = p.parent.name if p.name == "rig.toml" else p.stem
+    try:
+        raw = read_toml(p, "rig description")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such rig file") from None
+    return _check(raw, path, default)
+
+
+@cache
+def _name_of(path: str, mtime_ns: int) -> str:
+    """The `name` a rig file declares; the folder (rig.toml) or file stem if it declares none or is
+    unreadable (load_rig then says why); "" for a TOML file with neither `model` nor `sensors` (not a rig)."""
+    p = Path(path)
+    default = p.parent.name if p.name == "rig.toml" else p.stem
+    try:
+        raw = tomllib.loads(p.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return default
+    if "model" not in raw and "sensors" not in raw:
+        return ""
+    return raw["name"] if isinstance(raw.get("name"), str) else default
+
+
+def _version(path: Path) -> int:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return 0
+
+
+def _candidates(entry: Path):
+    """Rig files an entry of WATFLEX_RIGS offers: the file itself, or a folder's rig.toml, *.toml, */rig.toml."""
+    if entry.is_file():
+        yield entry
+    elif entry.is_dir():
+        if (entry / "rig.toml").is_file():
+            yield entry / "rig.toml"
+        yield from sorted(p for p in entry.glob("*.toml") if p.name != "rig.toml")
+        yield from sorted(entry.glob("*/rig.toml"))
+
+
+def _search_path() -> list[Path]:
+    return [Path(e).expanduser() for e in os.environ.get(ENV, "").split(os.pathsep) if e.strip()]
+
+
+def rig_file(name: str) -> Path:
+    """The file of rig `name` (WATFLEX_RIGS, then the bundled rigs); ConfigError if none."""
+    if not name or _is_path(name) or name.startswith("."):
+        raise ConfigError(f"a rig name is a plain name (a path goes to --rig), got {name!r}")
+    for entry in _search_path():
+        quick = [entry / f"{name}.toml", entry / name / "rig.toml"] if entry.is_dir() else []
+        for path in chain(quick, _candidates(entry)):  # the folder is listed only if the quick look fails
+            if path.is_file() and _name_of(str(path), _version(path)) == name:
+                return path
+    bundled = RIGS_DIR / f"{name}.toml"
+    if bundled.is_file():
+        return bundled
+    where = f"; {ENV} = {os.environ[ENV]}" if os.environ.get(ENV) else f" (set {ENV} or pass --rig PATH for your own)"
+    raise ConfigError(f"unknown rig {name!r} (known: {', '.join(known_rigs())}){where}")
+
+
+def _is_path(text: str) -> bool:
+    return text.endswith(".toml") or "/" in text or os.sep in text
+
+
 def load_rig(name: str) -> RigDescription:
-    """The description of rig `name` (rigs/<name>.toml); ConfigError if missing or malformed."""
-    path = RIGS_DIR / f"{name}.toml"
-    if not path.exists():
-        raise ConfigError(f"unknown rig {name!r} (known: {', '.join(known_rigs())})")
-    return _check(read_toml(path, "rig description"), str(path))
+    """The description of rig `name` (or of the rig file or folder `name` is a path to, if it
+    ends in .toml or has a '/'); ConfigError (one line naming the file and key) if unknown or malformed."""
+    if not isinstance(name, str):
+        raise ConfigError(f"a rig is named by a string, got {name!r}")
+    if _is_path(name):
+        path = Path(name).expanduser()
+        path = path / "rig.toml" if path.is_dir() else path
+        if not path.is_file():
+            raise ConfigError(f"{name}: no rig file (a rig is a NAME.toml file or a folder with rig.toml)")
+    else:
+        path = rig_file(name)
+    return _load(str(path.resolve()), _version(path))
+
+
+def use_rig(name_or_path: str) -> RigDescription:
+    """Load a rig by name or path (also a bare folder name here, with rig.toml); a path is put first
+    in WATFLEX_RIGS so that its name resolves to it here and in worker processes (a sidecar's
+    "rig": "myrig" after --rig /path/to/myrig)."""
+    by_path = _is_path(name_or_path) or (Path(name_or_path) / "rig.toml").is_file()
+    description = load_rig(str(Path(name_or_path).resolve()) if by_path else name_or_path)
+    if by_path:
+        entries = [e for e in os.environ.get(ENV, "").split(os.pathsep) if e and e != description.source]
+        os.environ[ENV] = os.pathsep.join([description.source, *entries])
+    return description
 
 
 def known_rigs() -> list[str]:
-    return sorted(p.stem for p in RIGS_DIR.glob("*.toml"))
+    """Names of the rigs found: WATFLEX_RIGS's and the bundled ones."""
+    names = {_name_of(str(p), _version(p)) for e in _search_path() for p in _candidates(e)} - {""}
+    return sorted(names | {p.stem for p in RIGS_DIR.glob("*.toml")})
 
 
-def channel_units() -> dict[str, dict[str, str]]:
+class _ChannelUnits(Mapping):
+    """rig -> {channel: unit}, resolved when asked (a rig found later, by WATFLEX_RIGS, is in it)."""
+
+    def __getitem__(self, rig: str) -> dict[str, str]:
+        return load_rig(rig).units()
+
+    def __contains__(self, rig) -> bool:
+        if not isinstance(rig, str):
+            return False
+        try:
+            rig_file(rig)
+        except ConfigError:
+            return False
+        return True
+
+    def __iter__(self):
+        return iter(known_rigs())
+
+    def __len__(self) -> int:
+        return len(known_rigs())
+
+
+def channel_units() -> Mapping[str, dict[str, str]]:
     """rig -> {channel: unit} over every description: the recording vocabulary."""
-    return {name: load_rig(name).units() for name in known_rigs()}
+    return _ChannelUnits()
