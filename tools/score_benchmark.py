@@ -160,7 +160,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", default="*", help="only case ids matching this glob, e.g. 'laser_arm-*'")
     parser.add_argument("--no-baselines", action="store_true", help="skip refit-only and SINDy")
     parser.add_argument("--workers", type=int, default=2, help="processes per diagnosis (default 2)")
+    parser.add_argument("--summarise", action="store_true",
+                        help="only print the tables of the cases already scored (BENCH_DIR/score.json, e.g. of a run stopped early)")
     args = parser.parse_args(argv)
+    if args.summarise:
+        try:
+            rows = json.loads((args.bench / "score.json").read_text())
+        except (OSError, ValueError) as exc:
+            print(f"error: cannot read {args.bench / 'score.json'}: {exc}", file=sys.stderr)
+            return 2
+        print(summary(rows, all("sindy" in r for r in rows) and bool(rows)))
+        return 0
     truth_path = args.bench / "truth.json"
     try:
         truth = json.loads(truth_path.read_text())
@@ -172,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: no case matches {args.cases!r} in {truth_path}", file=sys.stderr)
         return 2
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    cases.sort(key=lambda c: c["id"].rsplit("-", 1)[-1])  # by the opaque hash: rigs and kinds interleaved,
+    # so a run stopped early has scored a fair sample (score.json is rewritten after every case)
     rows = []
     start = time.perf_counter()
     for i, case in enumerate(cases, 1):
@@ -181,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: case {case['id']}: {exc}", file=sys.stderr)
             return 2
         rows.append(row)
+        (args.bench / "score.json").write_text(json.dumps(rows, indent=1, default=float) + "\n")
         elapsed = time.perf_counter() - start
         print(f"[{i}/{len(cases)}] {case['id']}: truth {row['truth']}, ours {row['ours']} ({row['verdict']})"
               + (f", SINDy {row['sindy']}" if "sindy" in row else "")

@@ -169,13 +169,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                 alternative = _gains(alternative, train["noise_ratio"], held["noise_ratio"])
                 if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative):
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
-                    best = alternative
+                    best, alternative = alternative, best
+                fitted.append(alternative)  # the explanation not taken competes as an alternative below
         if not _earns_place(best):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"]})
             break
-        alternatives += [_alternative(data, r, best) for r in fitted[1:]
-                         if r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
+        alternatives += [_alternative(data, r, best, len(current.effects)) for r in fitted if r is not best and r["model"] is not best["model"]
+                         and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
         current, sims = best["model"], best["sims"]
@@ -260,11 +261,13 @@ def _verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, re
             f"{refit_held['noise_ratio']:.2f} x) and no further catalogue effect earns its place: see 'residual'")
 
 
-def _alternative(data: Data, result: dict, chosen: dict) -> dict:
-    effect = result["model"].effects[-1]
-    params = {k: v for k, v in effect.items() if k not in ("effect", "where")}
-    return {"effect": result["effect"], "where": result["where"], "parameters": params,
-            "units": units_at(data, result["effect"], result["where"]),
+def _alternative(data: Data, result: dict, chosen: dict, before: int) -> dict:
+    """A fitted candidate that explains validation about as well as the chosen one (its effects are
+    those after the first `before` of its model)."""
+    new = result["model"].effects[before:]
+    params = {f"{e['effect']}.{k}" if len(new) > 1 else k: v for e in new for k, v in e.items() if k not in ("effect", "where")}
+    return {"effect": "+".join(e["effect"] for e in new), "where": result["where"], "parameters": params,
+            "units": {k: u for e in new for k, u in units_at(data, e["effect"], e["where"]).items()},
             "validation_nrmse": result["held_out"]["nrmse"], "validation_noise_ratio": result["held_out"]["noise_ratio"],
             "instead_of": chosen["effect"],
             "why_not_chosen": (f"validation {result['held_out']['noise_ratio']:.3f} x the noise against "
@@ -319,7 +322,13 @@ def final_intervals(data: Data, runner: Runner, model: Model) -> dict[int, dict[
         for p in CATALOGUE[effect["effect"]][1]:
             if p.quantum and p.name in effect:
                 out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
-    free = effect_slots_of(data, model) + rig_slots(data)
+    free = []
+    for slot in effect_slots_of(data, model) + rig_slots(data):
+        value = value_of(model, slot)
+        if not _at_bound(slot, value):
+            free.append(slot)
+        elif slot.where[0] == "effect":  # held at its bound (a friction side at 0): not free, no spread
+            out.setdefault(slot.where[1], {})[slot.name] = (value, value)
     if not model.effects:
         return out
     evaluate = evaluator(runner)
@@ -333,6 +342,11 @@ def final_intervals(data: Data, runner: Runner, model: Model) -> dict[int, dict[
         if slot.where[0] == "effect":
             out.setdefault(slot.where[1], {})[slot.name] = rng
     return out
+
+
+def _at_bound(slot: Slot, value: float) -> bool:
+    u, lo, hi = slot.to_internal(value), slot.to_internal(slot.low), slot.to_internal(slot.high)
+    return min(u - lo, hi - u) <= 0.01 * (hi - lo)
 
 
 def at_bounds(data: Data, model: Model) -> list[dict]:
@@ -351,9 +365,10 @@ def polish(data: Data, runner: Runner, result: dict) -> dict:
     """Carry the chosen candidate's fit on from a fresh finite-difference Jacobian at its solution,
     each simulation split over the workers; keep it if the training fit improved."""
     free = result["free"]
-    model, cost, J = levenberg(evaluator(runner), result["model"], free, [value_of(result["model"], s) for s in free],
-                               None, POLISH_ITERATIONS, floor=noise_cost(data))
-    if cost >= result["cost"]:
+    start = [value_of(result["model"], s) for s in free]
+    model, cost, J = levenberg(evaluator(runner), result["model"], free, start, None, POLISH_ITERATIONS,
+                               floor=noise_cost(data))
+    if [value_of(model, s) for s in free] == start:  # no step was an improvement
         return result
     sims = runner.simulate(model)
     return result if sims is None else scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
