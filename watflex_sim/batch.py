@@ -209,6 +209,11 @@ def load_sweep(path) -> Sweep:
             for value in spec["values"] if spec["kind"] == "values" else (spec.get("low", spec.get("mean")), spec.get("high")):
                 if value is not None:
                     check(resolve(Sweep(base, {}), {key: value}))
+        for i, values in enumerate(points(sweep)):  # every run's values, drawn ones too, before any runs
+            try:
+                check(resolve(sweep, values))
+            except ConfigError as exc:
+                raise ConfigError(f"run {i} ({', '.join(f'{k}={v!r}' for k, v in values.items())}): {exc}") from None
         first = check(resolve(sweep, next(points(sweep))))
         ControlLoop(first, _knobs(first["rig"]))  # set up, not run: controller, joints, effects, knobs
         return sweep

@@ -19,6 +19,7 @@ from scipy.optimize import lsq_linear
 
 from .effects import CATALOGUE
 from .engine import SimulationError
+from .interrupts import stop_pool, worker_init
 from .metrics import correlation, nrmse
 from .model import ConfigError
 from .recording import Recording
@@ -205,7 +206,8 @@ class Runner:
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
-        self.pool = ProcessPoolExecutor(workers, initializer=_hold, initargs=(data,)) if workers > 1 else None
+        self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(_hold, data))  # workers ignore Ctrl-C
+                     if workers > 1 else None)
 
     def map(self, fn, jobs: list) -> list:
         """fn over jobs, in order; reports progress as jobs finish."""
@@ -226,15 +228,15 @@ class Runner:
         sims = self.map(_simulate_one, [(model, i) for i in range(len(self.data.recordings))])
         return None if any(s is None for s in sims) else sims
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
         if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
+            stop_pool(self.pool) if abort else self.pool.shutdown(cancel_futures=True)  # abort: Ctrl-C, error
 
     def __enter__(self) -> "Runner":
         return self
 
     def __exit__(self, *exc) -> None:
-        self.close()
+        self.close(abort=exc[0] is not None)
 
 
 # --- fitting: Levenberg-Marquardt on bounded slots, Jacobian from signatures + Broyden ------

@@ -170,7 +170,7 @@ def write_recording(rec: Recording, directory, name: str) -> Path:
     rec = validate(rec, str(csv_path))
     meta = {"format": FORMAT, **rec.meta}
     try:
-        sidecar = json.dumps(meta, indent=2, sort_keys=True) + "\n"
+        sidecar = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False) + "\n"  # strict JSON
     except (TypeError, ValueError) as err:
         raise RecordingError(json_path, f"meta is not JSON-serialisable: {err}") from None
     contents = [(csv_path, _csv_text(rec).encode()), (json_path, sidecar.encode())]
