@@ -263,7 +263,7 @@ def cmd_batch(args) -> int:
         result = run_sweep(sweep, args.out, workers=args.workers, ray_address=args.ray,
                            keep_recordings=args.keep_recordings, progress=progress, plots=not args.no_plot)
     except KeyboardInterrupt:
-        print(f"\nwatflex-sim: interrupted; finished runs kept in {args.out / 'results.parquet'} (and .csv); "
+        print(f"{chr(10) if bar.enabled else ''}watflex-sim: interrupted; finished runs kept in {args.out / 'results.parquet'} (and .csv); "
               "run the same command again to resume", file=sys.stderr)
         return 130
     print(f"{result.ran} runs done ({result.failed} failed), {result.skipped} already done; wrote {result.results} "

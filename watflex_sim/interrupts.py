@@ -23,15 +23,18 @@ from .model import ConfigError
 STAGE_PREFIX = ".watflex-partial-"
 
 
-def writable(directory, what: str = "output directory") -> Path:
-    """Create `directory` if missing and prove it writable with a probe file; ConfigError (one
-    line) if a file is in the way, permission is missing or the file system is read-only."""
+def writable(directory, what: str = "output directory", keep: bool = False) -> Path:
+    """Prove `directory` writable with a probe file, before any work; ConfigError (one line) if a
+    file is in the way, permission is missing or the file system is read-only. Directories
+    it had to create are removed again unless `keep`."""
     directory = Path(directory)
+    missing = []
     for parent in [directory, *directory.parents]:
         if parent.exists():
             if not parent.is_dir():
                 raise ConfigError(f"{what} {directory}: {parent} is a file, not a directory")
             break
+        missing.append(parent)
     try:
         directory.mkdir(parents=True, exist_ok=True)
         probe = directory / f".watflex-probe-{uuid.uuid4().hex}"
@@ -39,6 +42,10 @@ def writable(directory, what: str = "output directory") -> Path:
         probe.unlink()
     except OSError as exc:
         raise ConfigError(f"{what} {directory} is not writable: {exc.strerror or exc}") from None
+    finally:
+        for made in [] if keep else missing:  # deepest first
+            with contextlib.suppress(OSError):
+                made.rmdir()
     return directory
 
 
@@ -63,7 +70,7 @@ def sigint_deferred() -> Iterator[None]:
 def staged(directory) -> Iterator[Path]:
     """A staging directory inside `directory` (created): files written there are moved to
     `directory` (same names) when the block ends without error, else removed with it."""
-    directory = writable(directory)
+    directory = writable(directory, keep=True)
     stage = Path(tempfile.mkdtemp(dir=directory, prefix=STAGE_PREFIX))
     try:
         yield stage
