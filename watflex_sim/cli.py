@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -75,8 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also open the rerun viewer (needs a display)")
     run.add_argument("--patch", type=Path, help="a diagnosis' patch.json: simulate with its effects and refit parameters")
 
-    view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)")
+    view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)",
+                          description="Run a scenario at real time, seen from above, then hold its end until the "
+                          "window is closed. Keys: space pause/resume, Backspace or R restart; Tab and Shift-Tab "
+                          "show MuJoCo's panels.")
     _add_scenario_args(view)
+    view.add_argument("--exit-after", type=float, metavar="S", help="close the window after S s of wall time (demos, tests)")
 
     plot = sub.add_parser("plot", help="plot a recording (.csv + .json, or .mat + .json) to PNG and/or rerun")
     plot.add_argument("recording", type=Path, help="NAME.csv or NAME.mat with NAME.json beside it")
@@ -169,13 +174,14 @@ def cmd_run(args) -> int:
 
 
 def cmd_view(args) -> int:
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        print("watflex-sim: error: no display (DISPLAY is not set): the viewer needs one; "
-              "use 'watflex-sim run ... --rrd' headless", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    from .viewer import view
+    scenario = load_scenario(args.scenario, args.overrides)
+    _need_display("the viewer")
+    from .viewer import check_display, view
 
-    view(load_scenario(args.scenario, args.overrides))
+    check_display()
+    if args.exit_after is not None and not (math.isfinite(args.exit_after) and args.exit_after > 0):
+        raise ConfigError(f"--exit-after must be a number of seconds > 0, got {args.exit_after}")
+    view(scenario, exit_after_s=args.exit_after)
     return 0
 
 
