@@ -4,6 +4,7 @@ Each bad input gives exit 2 (3 for divergence) with one line and nothing half-wr
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -305,3 +306,24 @@ def test_ctrl_c_stops_diagnose_within_2_s_in_one_line_and_writes_nothing(tmp_pat
     tail = [line for line in err.splitlines() if not line.startswith("[")]
     assert tail == ["watflex-sim: interrupted; nothing was written for the unfinished run"]
     assert not report.exists()
+
+
+# --- 5. the viewer ----------------------------------------------------------------------------------
+
+
+def test_viewer_without_or_with_a_dead_display_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    assert "needs a display" in one_line_exit(["view", "laser_arm_step"], EXIT_BAD_INPUT, tmp_path, capsys)
+    monkeypatch.setenv("DISPLAY", ":9999")  # no X server there
+    assert "cannot open the display" in one_line_exit(["view", "laser_arm_step"], EXIT_BAD_INPUT, tmp_path, capsys)
+
+
+@pytest.mark.skipif(not shutil.which("xvfb-run"), reason="needs Xvfb (apt-get install xvfb): no X server to test on")
+@pytest.mark.parametrize("name", ["laser_arm_step", "watflex_elbow_step"])
+def test_viewer_opens_and_exits_cleanly_under_xvfb(name):
+    """The issue saw 4 of 10 runs segfault and 2 hang at exit (GLFW terminated while the render
+    thread ran); measured after the fix: 20 of 20 clean (README). Exit 0, nothing on stderr."""
+    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", sys.executable, "-m", "watflex_sim.cli",
+                           "view", name, "--exit-after", "1"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stderr == ""
