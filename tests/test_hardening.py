@@ -79,6 +79,62 @@ def test_fuzz_any_set_value_is_accepted_in_range_or_refused_in_one_line(key, val
         assert math.isfinite(scenario[k]) and low <= scenario[k] <= high
 
 
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "nan" if v != v else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
+
+
+def _toml(table: dict) -> str:
+    """A TOML document of top-level keys with inline values (what these fuzz tests need)."""
+    return "".join(f"{json.dumps(k)} = {_toml_value(v)}\n" for k, v in table.items())
+
+
+_VALUES = st.one_of(st.floats(), st.integers(-2**65, 2**65), st.booleans(), st.text(max_size=6),
+                    st.lists(st.floats(), max_size=3), st.dictionaries(st.text(max_size=4), st.floats(), max_size=2))
+
+
+@settings(max_examples=60, deadline=None)
+@given(key=st.sampled_from(["duration_s", "payload_kg", "tilt_rad", "timestep", "seed", "n_segments", "noise",
+                            "frame_rate_hz", "locked_joints", "parameters", "controller", "reference"]),
+       value=_VALUES)
+def test_fuzz_scenario_files_load_in_range_or_refuse_in_one_line(tmp_path_factory, key, value):
+    path = tmp_path_factory.mktemp("s") / "fuzz.toml"
+    base = load_scenario("laser_arm_step")
+    raw = {k: base[k] for k in ("rig", "experiment", "duration_s", "controller", "reference")} | {key: value}
+    path.write_text(_toml(raw))
+    try:
+        scenario = load_scenario(str(path))
+    except ConfigError as exc:
+        assert "\n" not in str(exc) and str(exc)
+        return
+    for k, (low, high, _, _) in RANGES.items():
+        assert math.isfinite(scenario[k]) and low <= scenario[k] <= high
+
+
+@settings(max_examples=25, deadline=None)
+@given(values=st.lists(st.one_of(st.floats(), st.integers(-5, 5), st.text(max_size=3)), min_size=1, max_size=3))
+def test_fuzz_sweep_values_are_checked_up_front(tmp_path_factory, values):
+    from watflex_sim.batch import load_sweep
+
+    path = tmp_path_factory.mktemp("w") / "sweep.toml"
+    path.write_text(_toml({"scenario": "laser_arm_step", "parameters": {"payload_kg": values}}))
+    try:
+        sweep = load_sweep(path)
+    except ConfigError as exc:
+        assert "\n" not in str(exc) and str(path) in str(exc)
+        return
+    assert all(0 <= v <= 5 and math.isfinite(v) for v in sweep.parameters["payload_kg"]["values"])
+
+
 def test_sidecar_records_the_step_and_segments_used_in_strict_json(tmp_path):
     """A run at the model's own step (scenario timestep 0) records the laser arm's 0.1 ms and
     11 segments (README 'Damping, time step and integrator'); NaN never reaches a sidecar."""

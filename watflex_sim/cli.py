@@ -128,7 +128,7 @@ def _log_rerun(rec: Recording, rrd: Path | None, spawn: bool, frames=None, frame
 def _need_display(what: str) -> None:
     """ConfigError before any work when `what` needs a display and there is none (Linux)."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise ConfigError(f"{what} needs a display (DISPLAY is not set); write a .rrd headless and open it "
+        raise ConfigError(f"{what} needs a display and there is no display (DISPLAY is not set); write a .rrd headless and open it "
                           "where there is one: rerun FILE.rrd")
 
 
