@@ -95,13 +95,14 @@ def test_assign_reaches_into_tables_and_lists_and_refuses_unknown_keys():
 
 
 def test_sweep_rows_metrics_failed_runs_and_outputs(tmp_path, capsys):
-    path = sweep_file(tmp_path, LASER + "[parameters]\npayload_kg = [0.7]\ntimestep = [0.0001, 0.001, 0.0003]\n")
+    path = sweep_file(tmp_path, LASER + "[parameters]\npayload_kg = [0.7]\ntimestep = [0.0001, 0.001]\n"
+                      "locked_joints = [{}, {wrist = 0.0}]\n")  # a joint the laser arm has not: fails at set-up
     out = tmp_path / "out"
     assert main(["batch", str(path), "--out", str(out), "--workers", "2", "--keep-recordings"]) == 0
-    assert "3 runs done (2 failed), 0 already done" in capsys.readouterr().out
-    ok, diverged, bad = rows(out)
+    assert "4 runs done (3 failed), 0 already done" in capsys.readouterr().out
+    ok, bad, diverged, _ = rows(out)
     assert [r["status"] for r in (ok, diverged, bad)] == ["ok", "diverged", "error"]
-    assert "simulation diverged" in diverged["error"] and "not a whole multiple" in bad["error"]
+    assert "simulation diverged" in diverged["error"] and "cannot lock 'wrist'" in bad["error"]
     assert math.isnan(diverged["rise_time_s"]) and ok["wall_time_s"] > 0
     # the row's metrics are those of the same run simulated directly (examples/payload_sweep.py)
     rec = simulate(load_scenario("laser_arm_step", ["noise=false", "payload_kg=0.7"])).recording
@@ -144,6 +145,9 @@ def test_watflex_metrics_strain_and_tip_error_against_rigid_kinematics():
     ('[parameters]\npayload_kg = ["heavy"]\n', "must be a number"),
     ('[parameters]\npayload_kg = {low = "a", high = 2}\n', "must be numbers"),
     ("[parameters]\nseed = [0.5]\n", "seed must be an integer"),
+    ("[parameters]\npayload_kg = [0.7, -1.0]\n", "payload_kg must be a finite number in [0, 5] kg"),
+    ("[parameters]\ntimestep = [0.0001, 0.0009]\n", "not a whole multiple"),
+    ('method = "random"\nsamples = 50\n[parameters]\npayload_kg = {mean = 0.1, std = 0.5}\n', "run "),
     ('method = "sobol"\n[parameters]\npayload_kg = [0.0]\n', "method must be one of"),
     ('method = "lhs"\n[parameters]\npayload_kg = {low = 0.0, high = 1.0}\n', "needs samples"),
     ("samples = 3\n[parameters]\npayload_kg = [0.0]\n", "'samples' is for method random or lhs"),

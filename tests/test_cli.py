@@ -42,7 +42,7 @@ def test_watflex_run_has_camera_at_25_hz(tmp_path):
         (["run", "nope", "--out", "{out}"], "no scenario 'nope'"),
         (["run", "laser_arm_step", "--out", "{out}", "--set", "bogus=1"], "unknown scenario parameter 'bogus'"),
         (["run", "laser_arm_step", "--out", "{out}", "--set", "payload_kg=heavy"], "must be a number"),
-        (["run", "laser_arm_step", "--out", "{out}", "--set", "payload_kg=-1"], "payload_kg must be >= 0"),
+        (["run", "laser_arm_step", "--out", "{out}", "--set", "payload_kg=-1"], "payload_kg must be a finite number in [0, 5] kg"),
         (["run", "laser_arm_step", "--out", "{out}", "--set", "timestep=0.0003"], "not a whole multiple"),
         (["run", "laser_arm_step", "--out", "{out}", "--set", "direction=up"], "direction must be"),
         (["run", "laser_arm_step", "--out", "{out}", "--set", "controller.type=magic"], "unknown controller type"),

@@ -15,7 +15,7 @@ from watflex_sim.params import LASER_ARM, WATFLEX
 LASER_KEYS = ["reference", "hub_angle", "tip_sensor"]
 # watflex_elbow_step is the single-link set-up (rigs.md §2): link 1 and its bridges are not mounted
 WATFLEX_KEYS = ["shoulder_reference", "elbow_reference", "shoulder_angle", "elbow_angle",
-                "strain_2A", "strain_2B", "tip_x", "tip_y"]
+                "strain_2A", "strain_2B", "tip_x", "tip_y", "camera_age_s"]
 
 
 def pd(rig, obs):
@@ -53,9 +53,12 @@ def test_observations_are_the_rigs_channels(episode):
         assert list(obs) == keys
         for k in keys:
             assert obs[k].shape == spec[k].shape == (1,) and obs[k].dtype == spec[k].dtype
-    if rig == "watflex":  # camera at 25 Hz: a frame every 40 control steps, NaN between
-        frames = [k for k, obs in enumerate(observations) if np.isfinite(obs["tip_x"][0])]
+    assert all(np.isfinite(obs[k]).all() for obs in observations for k in keys)  # never NaN (issue 17)
+    if rig == "watflex":  # camera at 25 Hz: a frame every 40 control steps, held between
+        frames = [k for k, obs in enumerate(observations) if obs["camera_age_s"][0] == 0.0]
         assert frames == list(range(0, 201, 40))
+        assert observations[39]["camera_age_s"][0] == pytest.approx(0.039)
+        assert observations[39]["tip_x"][0] == observations[0]["tip_x"][0]
 
 
 def test_control_step_is_1ms_whole_substeps(episode):
@@ -104,7 +107,7 @@ def test_same_seed_same_observations():
         return np.concatenate([v for o in observations + laser for v in o.values()])
 
     a, b, c = trace(3), trace(3), trace(4)
-    np.testing.assert_array_equal(a, b)  # NaN camera gaps compare equal
+    np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c, equal_nan=True)  # the noise is the seed's
 
 

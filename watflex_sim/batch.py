@@ -209,6 +209,11 @@ def load_sweep(path) -> Sweep:
             for value in spec["values"] if spec["kind"] == "values" else (spec.get("low", spec.get("mean")), spec.get("high")):
                 if value is not None:
                     check(resolve(Sweep(base, {}), {key: value}))
+        for i, values in enumerate(points(sweep)):  # every run's values, drawn ones too, before any runs
+            try:
+                check(resolve(sweep, values))
+            except ConfigError as exc:
+                raise ConfigError(f"run {i} ({', '.join(f'{k}={v!r}' for k, v in values.items())}): {exc}") from None
         first = check(resolve(sweep, next(points(sweep))))
         ControlLoop(first, _knobs(first["rig"]))  # set up, not run: controller, joints, effects, knobs
         return sweep
@@ -329,6 +334,13 @@ def run_pool(tasks: Iterator[dict], workers: int, on_row: Callable[[dict], None]
     ctx = mp.get_context("forkserver" if forkserver else "spawn")
     if forkserver:
         ctx.set_forkserver_preload(["watflex_sim.batch", "watflex_sim.controllers"])
+        from multiprocessing import forkserver as fs
+
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited through exec: a Ctrl-C while the
+        try:  # server preloads would print its traceback; the parent stops the workers instead
+            fs.ensure_running()
+        finally:
+            signal.signal(signal.SIGINT, previous)
     procs: dict = {}  # parent end of the pipe -> [process, task or None]
 
     def start() -> None:
@@ -579,6 +591,9 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
         journal.flush()
         os.fsync(journal.fileno())
         journal.close()
+        if not complete and keep is not None and keep.exists():  # a worker killed mid-write leaves its temporaries
+            for tmp in keep.glob(".*.tmp"):
+                tmp.unlink(missing_ok=True)
         rows = finished()
         results = write_results(out, rows, keys)
         if complete and plots and (state["ran"] or not (out / "summary.png").exists()):

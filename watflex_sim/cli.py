@@ -4,16 +4,20 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from . import __version__
 from .engine import SimulationError, simulate
+from .interrupts import move, staged, writable
 from .model import ConfigError
 from .recording import Recording, RecordingError, read_recording, write_recording
-from .scenario import available, load_scenario
+from .scenario import MAX_DURATION_S, RANGES, available, load_scenario
 
 EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 3
@@ -34,6 +38,13 @@ class ProgressBar:
         end = "\n" if fraction >= 1 else ""
         sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * fraction:5.1f} %  ETA {eta:5.1f} s{end}")
         sys.stderr.flush()
+
+
+EPILOG = ("--set keys (physical ranges): " + ", ".join(
+    f"{k} {'[' if inc else '('}{lo:g}, {hi:g}] {unit}" for k, (lo, hi, unit, inc) in RANGES.items())
+    + ", seed (integer >= 0), n_segments (0 or 2-100), noise (true|false), direction (positive|negative), "
+    "friction (nominal|none), controller.KEY (gains >= 0). "
+    "Exit codes: 0 done, 2 bad input (one line, nothing written), 3 simulation diverged or unstable, 130 interrupted.")
 
 
 def _add_scenario_args(p: argparse.ArgumentParser) -> None:
@@ -78,8 +89,9 @@ def _read(path: Path, rig) -> Recording:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="watflex-sim",
-        description="MuJoCo simulator of the Watflex two-link and the laser-guided flexible arms "
-        "(shared/spec/rigs.md). Recordings follow shared/spec/recordings.md.",
+        description="MuJoCo simulator of the Watflex two-link and the laser-guided flexible arms. "
+        "Recordings are NAME.csv (time in s, SI units) with a NAME.json sidecar.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"watflex-sim {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress of the library")
@@ -94,8 +106,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also open the rerun viewer (needs a display)")
     run.add_argument("--patch", type=Path, help="a diagnosis' patch.json: simulate with its effects and refit parameters")
 
-    view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)")
+    view = sub.add_parser("view", help="run a scenario in MuJoCo's interactive viewer at real time (needs a display)",
+                          description="Run a scenario at real time, seen from above, then hold its end until the "
+                          "window is closed. Keys: space pause/resume, Backspace or R restart; Tab and Shift-Tab "
+                          "show MuJoCo's panels.")
     _add_scenario_args(view)
+    view.add_argument("--exit-after", type=float, metavar="S", help="close the window after S s of wall time (demos, tests)")
 
     plot = sub.add_parser("plot", help="plot a recording (.csv + .json, or .mat + .json) to PNG and/or rerun")
     plot.add_argument("recording", type=Path, help="NAME.csv or NAME.mat with NAME.json beside it")
@@ -142,6 +158,13 @@ def _log_rerun(rec: Recording, rrd: Path | None, spawn: bool, frames=None, frame
             frame_time=frame_time, recording_name=rec.meta.get("experiment"))
 
 
+def _need_display(what: str) -> None:
+    """ConfigError before any work when `what` needs a display and there is none (Linux)."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ConfigError(f"{what} needs a display and there is no display (DISPLAY is not set); write a .rrd headless and open it "
+                          "where there is one: rerun FILE.rrd")
+
+
 def cmd_run(args) -> int:
     scenario = _scenario(args)
     if args.patch:
@@ -152,42 +175,62 @@ def cmd_run(args) -> int:
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ConfigError(f"{args.patch}: not a diagnosis patch.json ({exc})".replace("\n", " ")) from None
     name = scenario["name"]
+    rrd = None if args.no_rrd else (args.rrd or args.out / f"{name}.rrd")
+    if args.spawn:
+        _need_display("--spawn (the rerun viewer)")
+    writable(args.out)  # before simulating: a bad directory costs nothing
+    if rrd is not None and args.rrd:
+        writable(rrd.parent, "rrd directory")
     bar = ProgressBar(name, sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
     result = simulate(scenario, progress=bar)
     rec = result.recording
-    csv_path = write_recording(rec, args.out, name)
+    with staged(args.out) as stage:  # every output appears at the end, or none
+        write_recording(rec, stage, name)
+        if not args.no_plot:
+            from .plot import plot_recording
+
+            plot_recording(rec, stage / f"{name}.png")
+        staged_rrd = None if rrd is None else stage / f".{name}.rrd.part" if args.rrd else stage / f"{name}.rrd"
+        if staged_rrd or args.spawn:
+            _log_rerun(rec, staged_rrd, args.spawn, result.frames, result.frame_time)
+        if args.rrd and staged_rrd:
+            move(staged_rrd, rrd)
+    csv_path = args.out / f"{name}.csv"
     print(f"wrote {csv_path} and {csv_path.with_suffix('.json').name} "
           f"({rec.time.size} samples, {len(rec.channels)} channels, {result.wall_time_s:.2f} s wall, "
           f"{rec.time[-1] / result.wall_time_s:.1f}x real time)")
     if not args.no_plot:
-        from .plot import plot_recording
-
-        print(f"wrote {plot_recording(rec, args.out / f'{name}.png')}")
-    rrd = None if args.no_rrd else (args.rrd or args.out / f"{name}.rrd")
-    if rrd or args.spawn:
-        _log_rerun(rec, rrd, args.spawn, result.frames, result.frame_time)
-        if rrd:
-            print(f"wrote {rrd}  (open with: rerun {rrd})")
+        print(f"wrote {args.out / f'{name}.png'}")
+    if rrd:
+        print(f"wrote {rrd}  (open with: rerun {rrd})")
     return 0
 
 
 def cmd_view(args) -> int:
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        print("watflex-sim: error: no display (DISPLAY is not set): the viewer needs one; "
-              "use 'watflex-sim run ... --rrd' headless", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    from .viewer import view
+    scenario = _scenario(args)
+    _need_display("the viewer")
+    from .viewer import check_display, view
 
-    view(_scenario(args))
+    check_display()
+    if args.exit_after is not None and not (math.isfinite(args.exit_after) and args.exit_after > 0):
+        raise ConfigError(f"--exit-after must be a number of seconds > 0, got {args.exit_after}")
+    view(scenario, exit_after_s=args.exit_after)
     return 0
 
 
 def cmd_plot(args) -> int:
     from .plot import plot_recording
 
-    rec = _read(args.recording, _loaded_rig(args.rig))
     png = args.png or args.recording.with_suffix(".png")
-    print(f"wrote {plot_recording(rec, png)}")
+    if args.spawn:
+        _need_display("--spawn (the rerun viewer)")
+    writable(png.parent, "PNG directory")
+    if args.rrd:
+        writable(args.rrd.parent, "rrd directory")
+    rec = _read(args.recording, _loaded_rig(args.rig))
+    with staged(png.parent) as stage:
+        plot_recording(rec, stage / png.name)
+    print(f"wrote {png}")
     if args.rrd or args.spawn:
         _log_rerun(rec, args.rrd, args.spawn)
         if args.rrd:
@@ -200,7 +243,19 @@ def cmd_diagnose(args) -> int:
     from .report import summary, write_report
 
     rig = _loaded_rig(args.rig)
-    recordings = [_read(path, rig) for path in args.recordings]
+    writable(args.report, "report directory")  # before hours of fitting
+    recordings = []
+    for path in args.recordings:
+        rec = _read(path, rig)
+        span = float(rec.time[-1] - rec.time[0])
+        if span < 0.05:
+            raise ConfigError(f"{path}: recording shorter than 50 ms ({span * 1e3:.3g} ms), too short to simulate")
+        step = float(np.median(np.diff(rec.time)))
+        if step >= 0.1 or span > MAX_DURATION_S:
+            raise ConfigError(f"{path}: time looks like milliseconds or is too long (median step {step:g} s, span "
+                              f"{span:g} s; at most {MAX_DURATION_S:g} s): time is in seconds (recordings.md); "
+                              "convert it, or declare \"time_unit\": \"ms\" in the sidecar")
+        recordings.append(rec)
     start = time.perf_counter()
     bar = ProgressBar("", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
 
@@ -231,6 +286,7 @@ def cmd_batch(args) -> int:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     _loaded_rig(args.rig)
     sweep = load_sweep(args.sweep)
+    writable(args.out)
     bar = ProgressBar("batch", sys.stderr.isatty() or bool(os.environ.get("WATFLEX_PROGRESS")))
 
     def progress(done: int, total: int) -> None:
@@ -241,7 +297,7 @@ def cmd_batch(args) -> int:
         result = run_sweep(sweep, args.out, workers=args.workers, ray_address=args.ray,
                            keep_recordings=args.keep_recordings, progress=progress, plots=not args.no_plot)
     except KeyboardInterrupt:
-        print(f"\nwatflex-sim: interrupted; finished runs kept in {args.out / 'results.parquet'} (and .csv); "
+        print(f"{chr(10) if bar.enabled else ''}watflex-sim: interrupted; finished runs kept in {args.out / 'results.parquet'} (and .csv); "
               "run the same command again to resume", file=sys.stderr)
         return 130
     print(f"{result.ran} runs done ({result.failed} failed), {result.skipped} already done; wrote {result.results} "

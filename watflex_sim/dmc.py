@@ -92,6 +92,8 @@ class StepTask(base.Task):
         self.rig = None
         self.last_command: dict[str, float] = {}
         self._obs = None
+        self._held: dict[str, float] = {}  # last camera frame (m)
+        self._age = 0.0  # s since it
 
     def _make_rig(self, physics, seed: int, noise: bool):
         kwargs = {"locked": self.locked} if self.rig_name == "watflex" else {}
@@ -108,7 +110,7 @@ class StepTask(base.Task):
             physics.reset(keyframe_id=0)
         _settle_bearings(physics.model.ptr, physics.data.ptr)
         self.rig = self._make_rig(physics, int(self.random.randint(2**31 - 1)), self.noise)
-        self.last_command = {}
+        self.last_command, self._held, self._age = {}, {}, 0.0
         super().initialize_episode(physics)  # calls after_step: clears the measurement
 
     def before_step(self, action, physics):
@@ -121,17 +123,30 @@ class StepTask(base.Task):
         self._obs = None  # measured once per control step, on first use
 
     def _measure(self, physics) -> dict[str, float]:
+        """The rig's channels; a camera channel between its 25 Hz frames holds the last frame
+        (an agent never sees NaN) and `camera_age_s` (s) tells how old that frame is."""
         if self._obs is None:
-            self._obs = self.rig.observe({self.reference_channel: self.reference(physics.time())})
+            obs = self.rig.observe({self.reference_channel: self.reference(physics.time())})
+            if "tip_x" in obs:
+                fresh = np.isfinite(obs["tip_x"])
+                self._age = 0.0 if fresh else self._age + CONTROL_PERIOD
+                for c in ("tip_x", "tip_y"):
+                    self._held[c] = obs[c] if fresh else self._held.get(c, 0.0)
+                    obs[c] = self._held[c]
+                obs["camera_age_s"] = self._age
+            self._obs = obs
         return self._obs
 
     def get_observation(self, physics):
-        """The rig's measured channels (rad, V, m; Watflex camera NaN between 25 Hz frames)."""
+        """The rig's measured channels (rad, V, m; Watflex camera held between its 25 Hz frames,
+        with `camera_age_s`, s since that frame)."""
         return collections.OrderedDict((k, np.array([v], dtype=float)) for k, v in self._measure(physics).items())
 
     def observation_spec(self, physics):
         """Channel names and shapes, from a noiseless probe rig (the episode's noise is untouched)."""
         probe = self._make_rig(physics, 0, False).observe({self.reference_channel: 0.0})
+        if "tip_x" in probe:
+            probe["camera_age_s"] = 0.0
         return collections.OrderedDict((k, specs.Array((1,), float, name=k)) for k in probe)
 
     def error(self, physics) -> float:

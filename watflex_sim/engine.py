@@ -129,6 +129,76 @@ def _check_state(model: mujoco.MjModel, data: mujoco.MjData, t: float) -> None:
     )
 
 
+class GrowthMonitor:
+    """Flags an exponentially growing oscillation long before it overflows.
+
+    It watches E = sum of qvel^2 over the flexible coordinates (DOFs of joints with a spring,
+    i.e. the beam/link segments; all DOFs if there are none), keeps the largest E of each
+    WINDOW-tick window and raises SimulationError when E has grown by more than GROWTH from one
+    window to the next RUN times in a row, at a steady rate (the mean log-ratio of the last
+    half of those windows is at least STEADY times that of the first half) and the last window
+    exceeds every window before the growth began. A step grows once; motion starting from rest
+    (a ramped load, a trajectory) grows like a power of t, its ratios falling towards 1 (a 4 s
+    half-cosine force on the locked Watflex: x34, x12, x5.8, ... x1.5); a numerical instability
+    (a step too large for the stiffest chain, gains too high) multiplies E by a constant factor
+    per window: the laser arm at 0.2 ms grows x2.8 per 20 ms and is flagged at 0.48 s (README
+    "Damping, time step and integrator")."""
+
+    WINDOW = 20  # control periods (20 ms)
+    GROWTH = 1.5  # energy ratio between consecutive windows counted as growth
+    RUN = 10  # consecutive growing windows (x1.5^10 = x58 in 200 ms); shipped scenarios reach at most 6
+    STEADY = 0.8  # exponential growth keeps its rate; power-law growth from rest slows down
+
+    def __init__(self, model: mujoco.MjModel, n_segments: int):
+        springs = [j for j in range(model.njnt) if model.jnt_stiffness[j] > 0]
+        self.dofs = np.array([model.jnt_dofadr[j] for j in springs] or range(model.nv), dtype=int)
+        self.timestep, self.n_segments = model.opt.timestep, n_segments
+        self.current = self.previous = self.before = 0.0  # window maxima of E, (rad/s)^2
+        self.run, self.longest = 0, 0  # consecutive growing windows now, most seen (for tests)
+        self.rates: list[float] = []  # log energy ratios of the current run's windows
+
+    def update(self, data: mujoco.MjData, k: int) -> None:
+        """Feed the state after control period k (0-based); sampled every other period (~1 us a tick)."""
+        if k % 2:
+            v = data.qvel[self.dofs]
+            self.current = max(self.current, float(v @ v))
+        if (k + 1) % self.WINDOW:
+            return
+        if self.current > self.GROWTH * self.previous:
+            self.run += 1
+            self.rates = (self.rates + [math.log(self.current / self.previous) if self.previous else math.inf])[-self.RUN:]
+        else:
+            self.before = max(self.before, self.previous if self.run else self.current)
+            self.run, self.rates = 0, []
+        self.longest = max(self.longest, self.run)
+        half = self.RUN // 2
+        if (self.run >= self.RUN and self.current > self.before
+                and sum(self.rates[half:]) >= self.STEADY * sum(self.rates[:half])):
+            t = (k + 1) * CONTROL_PERIOD
+            raise SimulationError(
+                f"simulation unstable (detected at t = {t:.3f} s): the flexible coordinates' energy grew "
+                f"x{math.exp(self.rates[-1]):.1f} per {self.WINDOW} ms for {self.run * self.WINDOW} ms, an "
+                f"exponentially growing oscillation; likely cause: the physics step {self.timestep * 1e3:g} ms "
+                f"is too large for the stiffest flexible chain ({self.n_segments} segments; stable steps in "
+                f"README 'Damping, time step and integrator') or the gains are too high; nothing was written")
+        if not self.run:
+            self.before = max(self.before, self.current)
+        self.previous, self.current = self.current, 0.0
+
+
+class _References:
+    """Reference values by tick: `refs[k]` is {channel: value} at t = k ms (columns, not dicts per tick)."""
+
+    def __init__(self, columns: dict[str, np.ndarray], n: int):
+        self.columns, self.n = columns, n
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k: int) -> dict[str, float]:
+        return {c: float(v[k]) for c, v in self.columns.items()}
+
+
 def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float = 0.3) -> None:
     """Let air-bearing slides sink onto the glass, then restore the planar pose at rest."""
     slides = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE]
@@ -195,8 +265,9 @@ class ControlLoop:
         self.n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
         # references depend on t only: tabulate them once for every tick
         times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
-        columns = {c: [f(t) for t in times] for c, f in references.items()}
-        self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
+        self.references = _References({c: np.array([f(t) for t in times]) for c, f in references.items()}, self.n_ticks)
+        self.n_segments = getattr(segmented(rig_name, scenario["n_segments"]), "n_segments", 0)
+        self.monitor = GrowthMonitor(self.model, self.n_segments)
         self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
         self._sensor_fifo = {c: [None] * n for c, n in patch.sensor_delay.items() if n > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
@@ -227,6 +298,7 @@ class ControlLoop:
         recorded.update(self._sense(self.rig.monitor()) if self.patch.sensor else self.rig.monitor())
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
+        self.monitor.update(self.data, k)
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
             _check_state(self.model, self.data, t + CONTROL_PERIOD)
         return obs, recorded
@@ -255,18 +327,22 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     """
     loop = ControlLoop(scenario, parameter_names)
     rig, n_ticks = loop.rig, loop.n_ticks
-    rows = []
+    column = {c: j for j, c in enumerate(rig.channels)}
+    table = np.full((n_ticks, len(column)), np.nan)  # preallocated: memory is what the run records
     frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * CONTROL_PERIOD))))
-    frames, frame_time = [], []
+    frame_ticks = range(0, n_ticks, frame_every)
+    frames = np.empty((len(frame_ticks), *np.shape(rig.arm_points())))
     report_every = max(1, int(0.1 / CONTROL_PERIOD))
     start = wallclock.perf_counter()
     with loop:
         for k in range(n_ticks):
             if k % frame_every == 0:
-                frames.append(rig.arm_points())
-                frame_time.append(k * CONTROL_PERIOD)
+                frames[k // frame_every] = rig.arm_points()
             obs, recorded = loop.tick(k)
-            rows.append(obs | recorded)
+            for c, v in (obs | recorded).items():
+                j = column.get(c)
+                if j is not None:
+                    table[k, j] = v
             if progress and k % report_every == 0:
                 progress(k / n_ticks)
     wall = wallclock.perf_counter() - start
@@ -274,11 +350,8 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         progress(1.0)
     log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * CONTROL_PERIOD, wall)
 
-    channels = {}
-    for c in rig.channels:
-        values = np.array([row.get(c, np.nan) for row in rows], dtype=float)
-        if not np.isnan(values).all():
-            channels[c] = values
+    channels = {c: np.ascontiguousarray(table[:, j]) for c, j in column.items() if not np.isnan(table[:, j]).all()}
+    del table
     controller_meta = dict(scenario["controller"])
     meta = {
         "format": FORMAT,
@@ -290,10 +363,13 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         "locked_joints": scenario["locked_joints"],
         "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
         "seed": scenario["seed"],
-        "scenario": {k: v for k, v in scenario.items() if k != "name"},
+        # the values used: timestep and n_segments 0 stand for the model's own
+        "scenario": {k: v for k, v in scenario.items() if k != "name"}
+        | {"timestep": float(loop.model.opt.timestep), "n_segments": loop.n_segments},
     }
     time = np.arange(n_ticks) * CONTROL_PERIOD
-    return SimResult(Recording(time, channels, meta), np.array(frames), np.array(frame_time), wall)
+    frame_time = np.array(frame_ticks, dtype=float) * CONTROL_PERIOD
+    return SimResult(Recording(time, channels, meta), frames, frame_time, wall)
 
 
 def energy(model: mujoco.MjModel, data: mujoco.MjData) -> float:

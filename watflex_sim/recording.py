@@ -160,13 +160,21 @@ def _mounted(chans: dict, meta: dict, source) -> dict:
     return {n: x for n, x in chans.items() if n not in absent}
 
 
+CSV_CHUNK = 20_000  # rows formatted at a time when writing
+
+
+def _csv_chunks(rec: Recording):
+    """CSV text in pieces: header ``time,<channels>``, ``.10g`` numbers, NaN as an empty cell."""
+    yield ",".join(["time", *rec.channels]) + "\n"
+    arrays = [rec.time, *rec.channels.values()]
+    for start in range(0, len(rec.time), CSV_CHUNK):
+        cols = [a[start:start + CSV_CHUNK].tolist() for a in arrays]
+        yield "".join(",".join("" if x != x else format(x, ".10g") for x in row) + "\n" for row in zip(*cols))
+
+
 def _csv_text(rec: Recording) -> str:
-    """CSV text: header ``time,<channels>``, ``.10g`` numbers, NaN as an empty cell."""
-    cols = [rec.time.tolist()] + [x.tolist() for x in rec.channels.values()]
-    lines = [",".join(["time", *rec.channels])]
-    for row in zip(*cols):
-        lines.append(",".join("" if x != x else format(x, ".10g") for x in row))
-    return "\n".join(lines) + "\n"
+    """The whole CSV text (see _csv_chunks)."""
+    return "".join(_csv_chunks(rec))
 
 
 def write_recording(rec: Recording, directory, name: str) -> Path:
@@ -186,10 +194,10 @@ def write_recording(rec: Recording, directory, name: str) -> Path:
     rec = Recording(rec.time, _mounted(rec.channels, rec.meta, csv_path), rec.meta)
     meta = {"format": FORMAT, **rec.meta}
     try:
-        sidecar = json.dumps(meta, indent=2, sort_keys=True) + "\n"
+        sidecar = json.dumps(meta, indent=2, sort_keys=True, allow_nan=False) + "\n"  # strict JSON
     except (TypeError, ValueError) as err:
         raise RecordingError(json_path, f"meta is not JSON-serialisable: {err}") from None
-    contents = [(csv_path, _csv_text(rec).encode()), (json_path, sidecar.encode())]
+    contents = [(csv_path, _csv_chunks(rec)), (json_path, [sidecar])]
     directory.mkdir(parents=True, exist_ok=True)
     csv_existed = csv_path.exists()
     temps, placed = [], []
@@ -199,7 +207,8 @@ def write_recording(rec: Recording, directory, name: str) -> Path:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
             temps.append(tmp)
             with os.fdopen(fd, "wb") as f:
-                f.write(data)
+                for piece in data:
+                    f.write(piece.encode())
                 f.flush()
                 os.fsync(f.fileno())
         for tmp, (target, _) in zip(temps, contents):
@@ -235,27 +244,61 @@ def _load_sidecar(path: Path) -> dict:
         raise RecordingError(side, f"sidecar is not valid JSON: {err}") from None
 
 
-def _read_csv(raw: bytes, rig: str, source):
-    """Parse the CSV; return (time, channels, where) with ``where(i)`` = 'line N'."""
+BLOCK_BYTES = 1 << 20  # CSV bytes parsed at a time (pyarrow reads a few dozen blocks ahead)
+
+
+def _read_csv(path: Path, rig: str, source):
+    """Read the CSV columnar (pyarrow, in blocks: memory about the data's size); on anything
+    pyarrow refuses, the line-by-line reader below names the first bad line as it reaches it.
+    Return (time, channels, where)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    header, skip = _csv_header(path, source)
+    _check_header(header, rig, source)
     try:
-        text = raw.decode("utf-8-sig")
+        reader = pacsv.open_csv(
+            path, read_options=pacsv.ReadOptions(skip_rows=skip, column_names=header, block_size=BLOCK_BYTES,
+                                                 use_threads=False),  # threads read the whole file ahead
+            parse_options=pacsv.ParseOptions(newlines_in_values=False, ignore_empty_lines=True),
+            convert_options=pacsv.ConvertOptions(column_types={h: pa.float64() for h in header},
+                                                 null_values=[""], strings_can_be_null=False))
+        data, n = np.empty((len(header), 0)), 0
+        for batch in reader:  # each block copied into one preallocated array, then freed
+            if n + batch.num_rows > data.shape[1]:  # capacity from the file size and the rows per block
+                rows = int(os.path.getsize(path) * batch.num_rows / BLOCK_BYTES * 1.05) + 1024
+                grown = np.empty((len(header), max(rows, int(1.25 * (n + batch.num_rows)))))
+                grown[:, :n] = data[:, :n]
+                data = grown
+            for j, column in enumerate(batch.columns):
+                data[j, n:n + batch.num_rows] = column.to_numpy(zero_copy_only=False)
+            n += batch.num_rows
+    except (pa.ArrowInvalid, pa.ArrowTypeError, UnicodeDecodeError, OSError):
+        return _read_csv_lines(path, rig, source)
+    cols = {h: data[j, :n] for j, h in enumerate(header)}  # rows of one array: no copy
+    time = cols.pop("time")
+    return time, cols, None  # None: line numbers unknown (blank lines are skipped); see read_recording
+
+
+def _csv_header(path: Path, source) -> tuple[list[str], int]:
+    """The header's cells (stripped) and the number of lines up to and including it."""
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            for n, line in enumerate(f, 1):
+                if line.strip():
+                    break
+            else:
+                raise RecordingError(source, "empty file (no header line)")
     except UnicodeDecodeError as err:
         raise RecordingError(source, f"not UTF-8 text (byte {err.start})") from None
-    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
-    header, rows, lines = None, [], []
     try:
-        for row in reader:
-            if not row or (len(row) == 1 and not row[0].strip()):
-                continue  # blank line
-            if header is None:
-                header = [c.strip() for c in row]
-            else:
-                rows.append(row)
-                lines.append(reader.line_num)
-    except csv.Error as err:
-        raise RecordingError(source, f"malformed CSV at line {reader.line_num}: {err}") from None
-    if header is None:
-        raise RecordingError(source, "empty file (no header line)")
+        row = next(csv.reader([line], strict=True))
+    except (csv.Error, StopIteration) as err:
+        raise RecordingError(source, f"malformed CSV at line {n}: {err}") from None
+    return [c.strip() for c in row], n
+
+
+def _check_header(header: list[str], rig: str, source) -> None:
     if "" in header:
         raise RecordingError(source, f"empty column name in header (column {header.index('') + 1})")
     if len(set(header)) < len(header):
@@ -264,17 +307,38 @@ def _read_csv(raw: bytes, rig: str, source):
     if "time" not in header:
         raise RecordingError(source, "no 'time' column in header")
     _check_names([h for h in header if h != "time"], rig, source)
-    data = np.empty((len(rows), len(header)))
-    for k, row in enumerate(rows):
-        if len(row) != len(header):
-            raise RecordingError(source, f"line {lines[k]} has {len(row)} fields, "
-                                         f"header has {len(header)}")
-        cells = [c.strip() for c in row]
-        bad = [j for j, c in enumerate(cells) if c and not _NUMBER.fullmatch(c)]
-        if bad:
-            raise RecordingError(source, f"line {lines[k]}, column {header[bad[0]]!r}: "
-                                         f"{_show(row[bad[0]])} is not a number")
-        data[k] = [float(c) if c else np.nan for c in cells]
+
+
+def _read_csv_lines(path: Path, rig: str, source):
+    """Parse the CSV line by line, stopping at the first bad line; return (time, channels, where)."""
+    header, rows, lines = None, [], []
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            reader = csv.reader(f, strict=True)
+            for row in reader:
+                if not row or (len(row) == 1 and not row[0].strip()):
+                    continue  # blank line
+                if header is None:
+                    header = [c.strip() for c in row]
+                    _check_header(header, rig, source)
+                    continue
+                if len(row) != len(header):
+                    raise RecordingError(source, f"line {reader.line_num} has {len(row)} fields, "
+                                                 f"header has {len(header)}")
+                cells = [c.strip() for c in row]
+                bad = [j for j, c in enumerate(cells) if c and not _NUMBER.fullmatch(c)]
+                if bad:
+                    raise RecordingError(source, f"line {reader.line_num}, column {header[bad[0]]!r}: "
+                                                 f"{_show(row[bad[0]])} is not a number")
+                rows.append([float(c) if c else np.nan for c in cells])
+                lines.append(reader.line_num)
+    except csv.Error as err:
+        raise RecordingError(source, f"malformed CSV at line {reader.line_num}: {err}") from None
+    except UnicodeDecodeError as err:
+        raise RecordingError(source, f"not UTF-8 text (byte {err.start} of a block)") from None
+    if header is None:
+        raise RecordingError(source, "empty file (no header line)")
+    data = np.array(rows, dtype=float).reshape(len(rows), len(header))
     cols = {h: np.ascontiguousarray(data[:, j]) for j, h in enumerate(header)}
     time = cols.pop("time")
     return time, cols, lambda i: f"line {lines[i]}"
@@ -371,16 +435,35 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".mat"):
         raise RecordingError(source, "not a .csv or .mat recording")
-    raw = _read_bytes(path, source)
+    if suffix == ".mat":
+        raw = _read_bytes(path, source)
+    elif not path.is_file():
+        _read_bytes(path, source)  # the same messages: not found, not readable, a directory
     meta = _load_sidecar(path) if sidecar is None else copy.deepcopy(sidecar)
     rig = _check_meta(meta, path.with_suffix(".json") if sidecar is None else source, True)
     if suffix == ".csv":
-        time, chans, where = _read_csv(raw, rig, source)
+        try:
+            time, chans, where = _read_csv(path, rig, source)
+        except OSError as err:
+            raise RecordingError(source, f"cannot read {path.name}: {err.strerror or err}") from None
     else:
         time, chans, where, scalars = _read_mat(raw, rig, source)
         meta = _fill_scalars(meta, scalars, source)
     chans = _mounted(chans, meta, source)
-    _check_samples(time, chans, source, where)
+    unit = meta.get("time_unit", "s") if isinstance(meta, dict) else "s"
+    if unit not in ("s", "ms"):
+        raise RecordingError(source, f"sidecar time_unit must be \"s\" or \"ms\", got {_show(unit)}")
+    if unit == "ms":  # declared milliseconds: the contract's seconds from here on
+        time = time / 1000.0
+        meta = {k: v for k, v in meta.items() if k != "time_unit"}
+    try:
+        _check_samples(time, chans, source, where or (lambda i: f"sample {i}"))
+    except RecordingError:
+        if where is not None:
+            raise
+        time, chans, where = _read_csv_lines(path, rig, source)  # to name the line
+        _check_samples(time / (1000.0 if unit == "ms" else 1.0), chans, source, where)
+        raise
     return Recording(time, chans, meta)
 
 

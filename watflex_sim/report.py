@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import uuid
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from .effects import Patch, apply_effects, apply_parameters
+from .interrupts import staged
 from .model import nominal_spec
 from .plot import plot_recording
 from .recording import Recording
@@ -56,27 +57,41 @@ def patched_spec(rig: str, patch_spec: dict) -> mujoco.MjSpec:
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    """Write through a temporary file created with mode 0666 & ~umask (as open() does), then rename."""
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def write_report(report: dict, recordings: list[Recording], directory: Path, rrd: bool = True) -> Path:
     """Write everything into `directory` (created); returns the report.json path.
 
-    Files are written under temporary names and renamed, report.json last, so a failure never
-    leaves a report that claims files which are not there."""
+    Files are written into a staging directory inside it and moved into place together at the
+    end (interrupts.staged), so an error or Ctrl-C leaves the previous contents, never a part."""
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     sims = report.pop("sims")
+    try:
+        with staged(directory) as stage:
+            _write_report(report, sims, recordings, stage, directory, rrd)
+    finally:
+        report["sims"] = sims
+    return directory / "report.json"
+
+
+def _write_report(report: dict, sims: dict, recordings: list[Recording], stage: Path, directory: Path,
+                  rrd: bool) -> None:
     out = dict(report)
     out["refit_parameters"] = parameter_values(report["rig"], report["refit_parameters"])
     figures = []
     for i, (rec, name) in enumerate(zip(recordings, report["recordings"])):
         if i >= MAX_PLOTS:
             break
-        png = directory / f"fit_{Path(name).stem}.png"
+        png = stage / f"fit_{Path(name).stem}.png"
         plot_recording(rec, png, {"nominal model": sims["nominal"][i], "diagnosed model": sims["final"][i]},
                        title=f"{name}: measured (solid), nominal model (dashed), diagnosed model (dotted)")
         figures.append(png.name)
@@ -90,7 +105,7 @@ def write_report(report: dict, recordings: list[Recording], directory: Path, rrd
             for c, v in rec.channels.items():
                 channels[f"{c}.{label}"] = np.interp(time, rec.time - rec.time[0], v)
                 units[f"{c}.{label}"] = unit_of.get(c, "")
-        log_run(time, channels, units, rrd_path=directory / "diagnosis.rrd", recording_name=f"diagnosis {report['recordings'][0]}")
+        log_run(time, channels, units, rrd_path=stage / "diagnosis.rrd", recording_name=f"diagnosis {report['recordings'][0]}")
         out["rrd"] = "diagnosis.rrd"
     proposal = out.get("proposed_experiment")
     if proposal and proposal.get("scenario_dict"):
@@ -104,14 +119,21 @@ def write_report(report: dict, recordings: list[Recording], directory: Path, rrd
         proposal["scenario"] = str(directory / "discriminate.toml")
         out["proposed_experiment"] = proposal
     spec = patched_spec(report["rig"], report["patch"])
-    _atomic_write(directory / "patched_model.xml", spec.to_xml())
-    _atomic_write(directory / "patch.json", json.dumps(report["patch"], indent=2) + "\n")
+    _atomic_write(stage / "patched_model.xml", spec.to_xml())
+    _atomic_write(stage / "patch.json", json.dumps(report["patch"], indent=2) + "\n")
     out["patched_model"] = str(directory / "patched_model.xml")
-    path = directory / "report.json"
-    _atomic_write(path, json.dumps(out, indent=2, default=float) + "\n")
-    report["sims"] = sims
-    return path
+    _atomic_write(stage / "report.json", json.dumps(_strict(out), indent=2, default=float, allow_nan=False) + "\n")
 
+
+def _strict(value):
+    """`value` with NaN and infinities as null (strict JSON readers reject NaN)."""
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value
 
 def summary(report: dict) -> str:
     """The human summary printed by `watflex-sim diagnose`."""

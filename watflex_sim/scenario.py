@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
 from pathlib import Path
 
 from .model import ROOT, ConfigError, read_toml
+from .params import CONTROL_PERIOD
 
 SCENARIOS_DIR = ROOT / "scenarios"
 
@@ -34,6 +36,51 @@ DEFAULTS = {
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
     "notes": "",
 }
+
+
+MAX_DURATION_S = 1000.0  # s: a 1 ms loop records 1000 samples per second per channel (~8 MB/min of memory)
+
+# Physical ranges of the numeric top-level keys: key -> (low, high, unit, low included).
+RANGES = {
+    "duration_s": (0.0, MAX_DURATION_S, "s", False),
+    "payload_kg": (0.0, 5.0, "kg", True),  # rigs.md experiments: 0-1.6 kg at the tip
+    "tilt_rad": (-0.5, 0.5, "rad", True),  # table tilt, about +-29 degrees
+    "tilt_azimuth_rad": (-2 * math.pi, 2 * math.pi, "rad", True),
+    "timestep": (0.0, CONTROL_PERIOD, "s", True),  # 0: the model's own
+    "frame_rate_hz": (0.0, 1 / CONTROL_PERIOD, "Hz", False),
+}
+MIN_TIMESTEP = 1e-6  # s: below this a 1 ms period takes over 1000 physics steps
+MAX_SEGMENTS = 100  # segments per flexible part
+GAIN_KEYS = ("kp", "kd", "kv", "ki", "k")  # controller gains (and k_*): >= 0
+
+
+def _number_in(key: str, value, low: float, high: float, unit: str, low_included: bool = True) -> None:
+    """ConfigError (one line, with the range and unit) unless `value` is a finite number in range."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{key} must be a number in {unit}, got {value!r}")
+    left = "[" if low_included else "("
+    if not math.isfinite(value) or value < low or (value == low and not low_included) or value > high:
+        raise ConfigError(f"{key} must be a finite number in {left}{low:g}, {high:g}] {unit}, got {value!r}")
+
+
+def _finite(value, where: str) -> None:
+    """ConfigError naming the dotted key of the first NaN or infinite number at any depth."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"{where} must be a finite number, got {value!r}")
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for k, v in items:
+        _finite(v, f"{where}.{k}" if where else str(k))
+
+
+def _non_negative_gains(table: dict, where: str) -> None:
+    """Controller gains (kp, kd, kv, ki, k, k_*; numbers or lists) must be >= 0."""
+    for key, value in table.items():
+        if isinstance(value, dict):
+            _non_negative_gains(value, f"{where}.{key}")
+        elif key in GAIN_KEYS or key.startswith("k_"):
+            for v in value if isinstance(value, list) else [value]:
+                if isinstance(v, (int, float)) and not isinstance(v, bool) and v < 0:
+                    raise ConfigError(f"{where}.{key} is a gain: it must be >= 0, got {v!r}")
 
 
 def available() -> list[str]:
@@ -96,24 +143,39 @@ def load_scenario(name_or_path: str, overrides: list[str] = ()) -> dict:
 
 
 def check(scenario: dict) -> dict:
-    """Validate types and required keys; normalise reference/command to lists of tables."""
+    """Validate types, finiteness and physical ranges (RANGES, gains >= 0) and required keys;
+    normalise reference/command to lists of tables. ConfigError (one line, range and unit)."""
     missing = [k for k, v in DEFAULTS.items() if v is None and scenario.get(k) is None]
     if missing:
         raise ConfigError(f"scenario is missing {', '.join(missing)}")
-    for key in ("duration_s", "payload_kg", "tilt_rad", "tilt_azimuth_rad", "timestep", "frame_rate_hz"):
-        value = scenario[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"scenario parameter {key!r} must be a number, got {value!r}")
-    if scenario["duration_s"] <= 0:
-        raise ConfigError(f"duration_s must be > 0 s, got {scenario['duration_s']}")
+    for key, (low, high, unit, included) in RANGES.items():
+        _number_in(key, scenario[key], low, high, unit, included)
+    if 0 < scenario["timestep"] < MIN_TIMESTEP:
+        raise ConfigError(f"timestep must be 0 (the model's own) or in [{MIN_TIMESTEP:g}, {CONTROL_PERIOD:g}] s, "
+                          f"got {scenario['timestep']!r}")
+    if scenario["timestep"]:
+        n = round(CONTROL_PERIOD / scenario["timestep"])
+        if abs(n * scenario["timestep"] - CONTROL_PERIOD) > 1e-9 * CONTROL_PERIOD:
+            raise ConfigError(f"timestep {scenario['timestep']!r} s: the {CONTROL_PERIOD * 1e3:g} ms control period is "
+                              "not a whole multiple of it (use 0 for the model's own, or 1 ms / N: 1e-4, 5e-4 s)")
+    n_seg = scenario["n_segments"]
+    if isinstance(n_seg, bool) or not isinstance(n_seg, int) or not (n_seg == 0 or 2 <= n_seg <= MAX_SEGMENTS):
+        raise ConfigError(f"n_segments must be 0 (the model's own) or an integer in [2, {MAX_SEGMENTS}], got {n_seg!r}")
+    seed = scenario["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise ConfigError(f"seed must be an integer in [0, 2^63), got {seed!r}")
+    _finite({k: v for k, v in scenario.items() if k not in ("notes", "reference", "command")}, "")
+    for key in ("reference", "command"):  # their scalars; replayed samples may hold NaN (missing)
+        for i, table in enumerate(scenario[key] if isinstance(scenario[key], list) else [scenario[key]]):
+            if isinstance(table, dict):
+                _finite({k: v for k, v in table.items() if not isinstance(v, list)}, f"{key}.{i}")
     if scenario["direction"] not in ("positive", "negative"):
         raise ConfigError(f"direction must be 'positive' or 'negative', got {scenario['direction']!r}")
-    if not isinstance(scenario["seed"], int) or isinstance(scenario["seed"], bool):
-        raise ConfigError(f"seed must be an integer, got {scenario['seed']!r}")
     if not isinstance(scenario["noise"], bool):
         raise ConfigError(f"noise must be true or false, got {scenario['noise']!r}")
     if not isinstance(scenario["controller"], dict) or "type" not in scenario["controller"]:
         raise ConfigError("scenario needs a [controller] table with a 'type'")
+    _non_negative_gains(scenario["controller"], "controller")
     if scenario["friction"] not in ("nominal", "none"):
         raise ConfigError(f"friction must be 'nominal' or 'none', got {scenario['friction']!r}")
     if not isinstance(scenario["joint_friction"], dict):
@@ -122,6 +184,8 @@ def check(scenario: dict) -> dict:
         raise ConfigError("effects must be a list of tables {effect = ..., where = ..., <parameters>}")
     if not isinstance(scenario["parameters"], dict):
         raise ConfigError("parameters must be a table name = ratio")
+    for name, ratio in scenario["parameters"].items():
+        _number_in(f"parameters.{name}", ratio, 0.0, 1e3, "(ratio to nominal)", False)
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):
