@@ -1,6 +1,7 @@
 """The 1 ms control loop: sensors -> controller -> actuators, zero-order hold over physics substeps."""
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 import time as wallclock
@@ -58,8 +59,10 @@ def substeps(control_period: float, timestep: float) -> int:
     return n
 
 
-def make_controller(scenario: dict, rig_name: str):
-    """The scenario's controller: a registered closed-loop type, or open loop from its command signals."""
+def make_controller(scenario: dict, rig_name: str, period: float = CONTROL_PERIOD):
+    """The scenario's controller: a registered closed-loop type, or open loop from its command signals.
+
+    A controller that takes a `period` and is not given one runs at the rig's (s)."""
     from controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
 
     spec = dict(scenario["controller"])
@@ -70,6 +73,8 @@ def make_controller(scenario: dict, rig_name: str):
     if kind not in CONTROLLERS:
         raise ConfigError(f"unknown controller type {kind!r} (known: none, {', '.join(CONTROLLERS)})")
     compensation = spec.pop("compensation", None)
+    if "period" not in spec and period != CONTROL_PERIOD and "period" in inspect.signature(CONTROLLERS[kind]).parameters:
+        spec["period"] = period
     try:
         controller = CONTROLLERS[kind](**spec)
         if compensation is not None:  # [controller.compensation]: friction compensation around it
@@ -84,13 +89,12 @@ def make_controller(scenario: dict, rig_name: str):
 def _references(scenario: dict, rig_name: str) -> dict[str, Callable[[float], float]]:
     """Reference signals by channel (rad); a laser-arm 'arc_m' step is converted by the beam length."""
     sign = 1.0 if scenario["direction"] == "positive" else -1.0
-    params = rig_params(rig_name)
     out = {}
     for table in scenario["reference"]:
         table = dict(table)
         scale = 1.0
         if "arc_m" in table:  # laser spot displacement along the tip's arc (m) -> rad
-            table["amplitude"], scale = table.pop("arc_m"), 1.0 / params.beam.length
+            table["amplitude"], scale = table.pop("arc_m"), 1.0 / rig_params(rig_name).beam.length
         out[table["channel"]] = make_signal(table, sign, scale)
     return out
 
@@ -175,26 +179,35 @@ class ControlLoop:
         )
         for edit in patch.model_edits:
             edit(self.model)
-        self.n_sub = substeps(CONTROL_PERIOD, self.model.opt.timestep)
+        self.period = period = load_rig(rig_name).control_period_s  # s, the rig's sample period
+        self.n_sub = substeps(period, self.model.opt.timestep)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
         self.rig = make_rig(scenario, self.model, self.data)
+        if scenario.get("initial"):  # start where a recording starts (generic rigs)
+            if not hasattr(self.rig, "start_at"):
+                raise ConfigError(f"rig {rig_name!r} cannot start from recorded values (its sensors are not generic)")
+            self.rig.start_at(scenario["initial"])
         frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(configure(frictions, scenario["joint_friction"]), patch.friction, patch.friction_add)
         self.friction = FrictionCallback(self.model, self.data, frictions)
-        self.controller = make_controller(scenario, rig_name)
+        self.controller = make_controller(scenario, rig_name, period)
+        reads = getattr(self.controller, "channels", None)  # a law on named channels says which it reads
+        unknown = sorted(set(reads()) - set(self.rig.channels)) if callable(reads) else []
+        if unknown:
+            raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
         references = _references(scenario, rig_name)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
             raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
-        self.n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
+        self.n_ticks = int(round(scenario["duration_s"] / period))
         # references depend on t only: tabulate them once for every tick
-        times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
+        times = [k * period for k in range(self.n_ticks)]
         columns = {c: [f(t) for t in times] for c, f in references.items()}
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
         self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
@@ -211,7 +224,7 @@ class ControlLoop:
 
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
-        t = k * CONTROL_PERIOD
+        t = k * self.period
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
             obs = self._sense(obs)
@@ -228,7 +241,7 @@ class ControlLoop:
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
-            _check_state(self.model, self.data, t + CONTROL_PERIOD)
+            _check_state(self.model, self.data, t + self.period)
         return obs, recorded
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
@@ -254,17 +267,17 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     `progress(fraction)` is called about every simulated 0.1 s.
     """
     loop = ControlLoop(scenario, parameter_names)
-    rig, n_ticks = loop.rig, loop.n_ticks
+    rig, n_ticks, period = loop.rig, loop.n_ticks, loop.period
     rows = []
-    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * CONTROL_PERIOD))))
+    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * period))))
     frames, frame_time = [], []
-    report_every = max(1, int(0.1 / CONTROL_PERIOD))
+    report_every = max(1, int(0.1 / period))
     start = wallclock.perf_counter()
     with loop:
         for k in range(n_ticks):
             if k % frame_every == 0:
                 frames.append(rig.arm_points())
-                frame_time.append(k * CONTROL_PERIOD)
+                frame_time.append(k * period)
             obs, recorded = loop.tick(k)
             rows.append(obs | recorded)
             if progress and k % report_every == 0:
@@ -272,7 +285,7 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     wall = wallclock.perf_counter() - start
     if progress:
         progress(1.0)
-    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * CONTROL_PERIOD, wall)
+    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * period, wall)
 
     channels = {}
     for c in rig.channels:
@@ -292,7 +305,7 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         "seed": scenario["seed"],
         "scenario": {k: v for k, v in scenario.items() if k != "name"},
     }
-    time = np.arange(n_ticks) * CONTROL_PERIOD
+    time = np.arange(n_ticks) * period
     return SimResult(Recording(time, channels, meta), np.array(frames), np.array(frame_time), wall)
 
 

@@ -51,6 +51,13 @@ def segmented(rig: str, n_segments: int):
 
 def nominal_spec(rig: str) -> mujoco.MjSpec:
     """The committed nominal model of `rig`, or the generator's if the XML is not there."""
+    if rig not in RIGS:  # a rig from its description alone: models/<model>.xml, generated outside the code
+        from .rigdesc import load_rig
+
+        path = MODELS_DIR / f"{load_rig(rig).model}.xml"
+        if not path.exists():
+            raise ConfigError(f"rig {rig!r}: model file {path} not found")
+        return mujoco.MjSpec.from_file(str(path))
     params = rig_params(rig)
     path = MODELS_DIR / f"{rig}.xml"
     return mujoco.MjSpec.from_file(str(path)) if path.exists() else BUILDERS[rig](params)

@@ -32,6 +32,7 @@ DEFAULTS = {
     "frame_rate_hz": 50.0,  # Hz, arm drawings sent to rerun
     "effects": [],  # catalogue effects added to the nominal model (effects.py, recordings.md)
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
+    "initial": {},  # channel -> first recorded value: the run starts in that state (generic rigs)
     "notes": "",
 }
 
@@ -122,6 +123,8 @@ def check(scenario: dict) -> dict:
         raise ConfigError("effects must be a list of tables {effect = ..., where = ..., <parameters>}")
     if not isinstance(scenario["parameters"], dict):
         raise ConfigError("parameters must be a table name = ratio")
+    if not isinstance(scenario["initial"], dict):
+        raise ConfigError("initial must be a table channel = value")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):
