@@ -85,13 +85,17 @@ def test_missing_file_or_variable_names_it(tmp_path):
     assert main(["diagnose", str(tmp_path / "other.mat"), "--rig", "quanser_2dsfl", "--report", str(tmp_path / "r")]) == EXIT_BAD_INPUT
 
 
-@pytest.mark.parametrize("run, limit", [("fsf", (0.05, 0.025)), ("psf", (0.06, 0.03))])
-def test_the_law_as_data_reproduces_the_recorded_command(run, limit):
-    """The sidecar's law on the recorded states gives the recorded current command: rms error
-    4.7 % / 2.3 % (fsf), 5.5 % / 1.6 % (psf) of the command's rms with the backward-difference rate filter."""
+@pytest.mark.parametrize("run, method, limit", [
+    ("fsf", "euler", (0.014, 0.016)), ("psf", "euler", (0.007, 0.005)),  # measured 1.22 / 1.38 %, 0.58 / 0.36 %
+    ("fsf", "backward_diff", (0.055, 0.026)), ("psf", "backward_diff", (0.06, 0.02)),  # 4.95 / 2.32 %, 5.47 / 1.74 %
+])
+def test_the_law_as_data_reproduces_the_recorded_command(run, method, limit):
+    """The sidecar's law on the recorded states gives the recorded current command (rms error over
+    the command's rms); forward Euler, the rig file's rate filter, does it best of the discretisations."""
     rec = recording(run)
     spec = dict(rec.meta["controller"])
     spec.pop("type")
+    spec["rate_method"] = method
     law = StateFeedback(**spec, period=0.002)
     law.reset()
     names = law.channels()
@@ -114,3 +118,52 @@ def test_nominal_model_reaches_the_target_the_rig_stops_short_of():
         assert 0.75 < short.mean() < 1.25 and 0.25 < np.abs(rec.channels["current2_cmd"][window]).mean() < 0.33
         assert np.abs(ref - sim.channels["hub2"][window]).mean() / DEG < 0.1
         assert np.abs(sim.channels["current2_cmd"][window]).mean() < 0.05
+
+
+def test_the_engine_runs_at_the_rigs_period_and_checks_the_laws_channels():
+    from watflex_sim.engine import simulate
+    from watflex_sim.model import ConfigError
+    from watflex_sim.resim import scenario_from_recording
+
+    scenario = scenario_from_recording(recording("fsf"))
+    scenario["duration_s"] = 0.02
+    assert np.diff(simulate(scenario).recording.time) == pytest.approx(0.002)  # control_period_s, not 1 ms
+    scenario["controller"]["states"][1] = "link_1"
+    with pytest.raises(ConfigError, match="reads unknown channel.s. of quanser_2dsfl: link_1"):
+        simulate(scenario)
+
+
+def test_recording_files_of_different_lengths_name_the_file(tmp_path):
+    from scipy.io import savemat
+
+    for f in DATA.glob("data_fsf_*.mat"):
+        shutil.copy(f, tmp_path / f.name)
+    savemat(tmp_path / "data_fsf_Im2.mat", {"data_Im2": np.zeros((100, 3))})
+    with pytest.raises(RecordingError, match=r"data_fsf_Im2\.mat: variable 'data_Im2' has 100 samples, the time .data_fsf_th11\.mat. has 9719"):
+        read_recording(tmp_path / "data_fsf_th11.mat", sidecar=load_rig("quanser_2dsfl").sidecar)
+
+
+@pytest.mark.slow
+def test_diagnosis_finds_the_soft_link_but_not_the_friction_at_drive_2():
+    """`diagnose` on the fsf run (fitted) and the psf run (held out), both cropped to their first
+    10 s to keep the test under a minute (45 s on 2 cores; the full runs give the same answer, README
+    "A rig we did not build"). It finds link 2 softer than beam theory, near Quanser's own
+    torque-impulse value Ks2_exp = 2.5 N m/rad (config_2dslf.m; found 2.22, full runs 2.28), and
+    ranks dry friction at drive 2 next but below the bar (training 2.5 %, held-out 2.7 %) although
+    the data show drive 2 sticking: this test pins that disagreement, it does not endorse it."""
+    from watflex_sim.diagnose import diagnose
+    from watflex_sim.recording import Recording
+
+    recs = []
+    for run in ("fsf", "psf"):
+        rec = recording(run)
+        keep = rec.time < 10.0
+        recs.append(Recording(rec.time[keep], {c: v[keep] for c, v in rec.channels.items()}, rec.meta))
+    report = diagnose(recs, ["fsf", "psf"], workers=2, max_effects=2)
+    assert [(f["effect"], f["where"]) for f in report["findings"]] == [("link_stiffness_change", "link2")]
+    ks2 = _builder().torsional_stiffness(RIG["datasheet"], 2) * report["findings"][0]["parameters"]["ratio"] \
+        * report["refit_parameters"]["link2_stiffness"]  # a ratio to nominal
+    assert ks2 == pytest.approx(2.5, rel=0.2)
+    assert report["held_out"]["after"]["nrmse"] < 0.95 * report["held_out"]["before"]["nrmse"]
+    best_rejected = report["rejected"][0]
+    assert best_rejected["where"] == "drive2" and best_rejected["effect"] in ("coulomb_friction", "stribeck_friction")

@@ -1,6 +1,6 @@
 """Figure docs/quanser_fit.png: the Quanser 2DSFL runs, measured vs nominal vs diagnosed model.
 
-Usage: python tools/quanser_figure.py REPORT_DIR [--out docs/quanser_fit.png]
+Usage: python tools/quanser_figure.py REPORT_DIR [--out docs/quanser_fit.png] [--rate-method M]
 REPORT_DIR is a `watflex-sim diagnose` output on tests/data/quanser_2dsfl/data_{fsf,psf}_th11.mat;
 its patch.json (effects and refit parameters) is re-simulated. Hub 2 and its current are shown,
 where the rig's drive 2 visibly sticks short of its target, and hub 1, whose moves knock it.
@@ -32,6 +32,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("report", type=Path)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "quanser_fit.png")
+    parser.add_argument("--rate-method", help="override the sidecar's rate filter discretisation (the diagnosis must have used it)")
     args = parser.parse_args()
     patch = json.loads((args.report / "patch.json").read_text())
     runs = ("fsf", "psf")
@@ -39,6 +40,8 @@ def main() -> int:
     fig, axes = plt.subplots(len(rows), len(runs), figsize=(13, 8), sharex=True)
     for col, run in enumerate(runs):
         rec = read_recording(DATA / f"data_{run}_th11.mat")
+        if args.rate_method:
+            rec.meta["controller"]["rate_method"] = args.rate_method
         nominal = resimulate(rec)
         diagnosed = resimulate(rec, patch.get("effects", []), patch.get("parameters", {}))
         for row, (channel, scale, label) in enumerate(rows):

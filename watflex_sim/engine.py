@@ -210,8 +210,10 @@ class ControlLoop:
         times = [k * period for k in range(self.n_ticks)]
         columns = {c: [f(t) for t in times] for c, f in references.items()}
         self.references = [{c: v[k] for c, v in columns.items()} for k in range(self.n_ticks)]
-        self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
-        self._sensor_fifo = {c: [None] * n for c, n in patch.sensor_delay.items() if n > 0}  # filled by the first reading
+        ticks = CONTROL_PERIOD / period  # delays are counted in CONTROL_PERIOD ticks (effects.delay): in ours
+        self._commands = [{}] * round(patch.command_delay * ticks)  # FIFO of commands waiting for the plant
+        self._sensor_fifo = {c: [None] * round(n * ticks) for c, n in patch.sensor_delay.items()
+                             if round(n * ticks) > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
 

@@ -415,6 +415,9 @@ def _read_mat_split(path: Path, rig: str):
             raise RecordingError(source, f"variable {variable!r} (shape {array.shape}) has no column {column} (for {channel!r})")
         columns[channel] = _as_vector(array[:, column - 1], f"variable {variable!r} column {column}", source) \
             * float(spec.get("scale", 1.0))
+        if columns[channel].size != columns["time"].size:
+            raise RecordingError(source, f"variable {variable!r} has {columns[channel].size} samples, "
+                                         f"the time ({description.mat_time['file'].replace('{run}', run)}) has {columns['time'].size}")
     time = columns.pop("time")
     return time, columns, lambda i: f"sample {i}"
 
