@@ -94,6 +94,8 @@ def test_start_at_puts_the_rig_where_the_sensors_read_the_first_samples():
     ({"unit": "-", "kind": "measured", "link": "link", "quantity": "strain", "length": 0.4}, "needs the link's thickness"),
     ({"unit": "rad", "kind": "measured", "quantity": "deflection_angle"}, "needs a joint"),
     ({"unit": "rad", "kind": "measured", "joint": "drive", "scale": 0}, "scale must not be 0"),
+    ({"unit": "rad", "kind": "measured", "link": "link", "length": 0.4}, "quantity 'position' needs a joint"),
+    ({"unit": "rad", "kind": "measured", "joint": "drive", "step": -1e-3}, "step must be >= 0"),
 ])
 def test_bad_channel_is_one_line_naming_file_and_channel(channel, why):
     with pytest.raises(ConfigError) as err:

@@ -19,7 +19,7 @@ SENSORS = ("laser_arm", "watflex", "generic")
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
 # velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
 QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
-# Keys a channel may have; per kind, the ones it needs (besides unit and kind).
+# Keys a channel may have (rigs.GenericRig reads them; the other sensor models read unit, kind, noise).
 CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", "step", "noise", "filter_hz",
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range"}
 MAT_KEYS = {"file", "variable", "column", "scale"}
@@ -109,8 +109,11 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
                 "range", "bits"):
         if key in spec and (isinstance(spec[key], bool) or not isinstance(spec[key], (int, float))):
             fail(f"channel {channel!r}: {key} must be a number, got {spec[key]!r}")
-    for key in ("step", "noise", "filter_hz", "length", "thickness", "limit", "range"):
-        if spec.get(key, 0) < 0 or (key in ("length", "thickness", "limit", "range") and spec.get(key, 1) == 0):
+    for key in ("step", "noise", "filter_hz"):
+        if spec.get(key, 0) < 0:
+            fail(f"channel {channel!r}: {key} must be >= 0, got {spec[key]!r}")
+    for key in ("filter_zeta", "length", "thickness", "limit", "range", "bits"):
+        if spec.get(key, 1) <= 0:
             fail(f"channel {channel!r}: {key} must be > 0, got {spec[key]!r}")
     if spec.get("scale", 1) == 0:
         fail(f"channel {channel!r}: scale must not be 0")
@@ -123,6 +126,8 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
         fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain)")
     if quantity in ("deflection", "deflection_angle", "strain") and "link" not in spec:
         fail(f"channel {channel!r}: quantity {quantity!r} needs a link")
+    if quantity in ("position", "velocity") and "joint" not in spec:
+        fail(f"channel {channel!r}: quantity {quantity!r} needs a joint")
     if quantity == "strain" and not {"thickness", "length"} <= set(spec):
         fail(f"channel {channel!r}: a strain needs the link's thickness and length (m)")
     if quantity == "deflection" and "length" not in spec:
