@@ -157,3 +157,10 @@ def test_sensor_filters_first_and_second_order():
     for _ in range(2000):
         last = rig.observe({})
     assert last["one"] == pytest.approx(1.0, abs=1e-9) and last["two"] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_a_rig_with_its_own_sensor_model_runs_at_1_ms_only():
+    from watflex_sim import load_scenario, simulate
+
+    with pytest.raises(ConfigError, match="runs at 1 ms only"):
+        simulate(load_scenario("laser_arm_step", ["control_period_s=0.002", "duration_s=0.01"]))

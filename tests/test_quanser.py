@@ -128,6 +128,8 @@ def test_the_engine_runs_at_the_rigs_period_and_checks_the_laws_channels():
     scenario = scenario_from_recording(recording("fsf"))
     scenario["duration_s"] = 0.02
     assert np.diff(simulate(scenario).recording.time) == pytest.approx(0.002)  # control_period_s, not 1 ms
+    scenario["control_period_s"] = 0.001  # a sidecar may say otherwise
+    assert np.diff(simulate(scenario).recording.time) == pytest.approx(0.001)
     scenario["controller"]["states"][1] = "link_1"
     with pytest.raises(ConfigError, match="reads unknown channel.s. of quanser_2dsfl: link_1"):
         simulate(scenario)

@@ -30,8 +30,11 @@ def make_rig(scenario: dict, model: mujoco.MjModel, data: mujoco.MjData):
     """The rig's sensors and actuators, as its description (rigs/<rig>.toml) names them."""
     rig_name = scenario["rig"]
     description = load_rig(rig_name)
+    period = scenario.get("control_period_s") or description.control_period_s
     if description.sensors == "generic":
-        return GenericRig(model, data, description, scenario["noise"], scenario["seed"])
+        return GenericRig(model, data, description, scenario["noise"], scenario["seed"], period)
+    if period != CONTROL_PERIOD:
+        raise ConfigError(f"rig {rig_name!r} runs at {CONTROL_PERIOD * 1e3:g} ms only (its sensors are not generic)")
     kwargs = {"locked": scenario["locked_joints"]} if description.sensors == "watflex" else {}
     params = segmented(rig_name, scenario["n_segments"])
     return RIG_CLASSES[description.sensors](model, data, params, scenario["noise"], scenario["seed"], **kwargs)
@@ -153,7 +156,7 @@ class ControlLoop:
     """A scenario set up to run: model, data, rig, joint friction, controller and references.
 
     Use it as `with ControlLoop(scenario) as loop:` (the friction callback is process-global
-    and installed only inside the block). `tick(k)` does one 1 ms period at t = k ms:
+    and installed only inside the block). `tick(k)` does control period k (the rig's, 1 ms unless it says):
     references -> sensors -> controller -> saturation/converters -> `n_sub` physics steps with
     the command held (zero-order hold), then the divergence check every CHECK_EVERY periods.
     Raises ConfigError for an impossible configuration.
@@ -179,7 +182,8 @@ class ControlLoop:
         )
         for edit in patch.model_edits:
             edit(self.model)
-        self.period = period = load_rig(rig_name).control_period_s  # s, the rig's sample period
+        # s: the scenario's (a recording's sidecar) sample period, else the rig's
+        self.period = period = scenario.get("control_period_s") or load_rig(rig_name).control_period_s
         self.n_sub = substeps(period, self.model.opt.timestep)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
@@ -302,6 +306,7 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         "payload_kg": scenario["payload_kg"],
         "controller": controller_meta,
         "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
+        "control_period_s": period,
         "locked_joints": scenario["locked_joints"],
         "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
         "seed": scenario["seed"],

@@ -21,12 +21,12 @@ def scenario_from_recording(rec: Recording) -> dict:
     meta, description = rec.meta, load_rig(rec.rig)
     scenario = copy.deepcopy(DEFAULTS)
     time = rec.time - rec.time[0]
-    period = description.control_period_s
+    period = float(meta.get("control_period_s") or description.control_period_s)  # s: the sidecar's, else the rig's
     scenario.update(
         rig=rec.rig, experiment=meta.get("experiment", "recording"), name=meta.get("experiment", "recording"),
         duration_s=float(round(time[-1] / period) + 1) * period,
         payload_kg=float(meta.get("payload_kg", 0.0)), locked_joints=dict(meta.get("locked_joints", {})),
-        noise=False, seed=0,
+        noise=False, seed=0, control_period_s=period,
     )
     for key in ("tilt_rad", "actuator_bench", "friction", "joint_friction", "timestep"):
         if key in meta.get("scenario", {}):  # our own recordings say how they were made
@@ -64,7 +64,7 @@ def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None
     With `until` (s from the start) the simulation stops there; later samples hold its last value."""
     scenario = scenario_from_recording(rec)
     if until is not None:
-        scenario["duration_s"] = min(scenario["duration_s"], until + 2 * load_rig(rec.rig).control_period_s)
+        scenario["duration_s"] = min(scenario["duration_s"], until + 2 * scenario["control_period_s"])
     scenario["effects"] = list(effects)
     scenario["parameters"] = dict(parameters or {})
     sim = simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording

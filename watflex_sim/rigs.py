@@ -256,13 +256,13 @@ class GenericRig(Rig):
     3 t w_tip (length - x) / (2 length^3) (a cantilever with a tip force).
     """
 
-    def __init__(self, model, data, description, noise: bool, seed: int):
+    def __init__(self, model, data, description, noise: bool, seed: int, period: float | None = None):
         super().__init__(model, data, description, noise, seed)
         self.name = description.name
         self.channels = tuple(description.channels)
         self.command_channels = tuple(description.of_kind("command"))
         self._inputs = tuple(description.of_kind("reference") + description.of_kind("disturbance"))
-        self._period = description.control_period_s
+        self._period = period or description.control_period_s  # s, the sample period the filters run at
         self._measured, self._commands, self._disturbances = [], {}, {}
         mujoco.mj_kinematics(model, data)
         for channel, spec in description.channels.items():

@@ -32,6 +32,7 @@ DEFAULTS = {
     "frame_rate_hz": 50.0,  # Hz, arm drawings sent to rerun
     "effects": [],  # catalogue effects added to the nominal model (effects.py, recordings.md)
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
+    "control_period_s": 0.0,  # s, sample period of sensors and controller; 0 = the rig's (rigs/<rig>.toml)
     "initial": {},  # channel -> first recorded value: the run starts in that state (generic rigs)
     "notes": "",
 }
@@ -101,7 +102,7 @@ def check(scenario: dict) -> dict:
     missing = [k for k, v in DEFAULTS.items() if v is None and scenario.get(k) is None]
     if missing:
         raise ConfigError(f"scenario is missing {', '.join(missing)}")
-    for key in ("duration_s", "payload_kg", "tilt_rad", "tilt_azimuth_rad", "timestep", "frame_rate_hz"):
+    for key in ("duration_s", "payload_kg", "tilt_rad", "tilt_azimuth_rad", "timestep", "frame_rate_hz", "control_period_s"):
         value = scenario[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"scenario parameter {key!r} must be a number, got {value!r}")
@@ -123,6 +124,8 @@ def check(scenario: dict) -> dict:
         raise ConfigError("effects must be a list of tables {effect = ..., where = ..., <parameters>}")
     if not isinstance(scenario["parameters"], dict):
         raise ConfigError("parameters must be a table name = ratio")
+    if scenario["control_period_s"] < 0:
+        raise ConfigError(f"control_period_s must be >= 0 s (0: the rig's), got {scenario['control_period_s']}")
     if not isinstance(scenario["initial"], dict):
         raise ConfigError("initial must be a table channel = value")
     if not isinstance(scenario["locked_joints"], dict):
