@@ -1,4 +1,5 @@
-"""The 1 ms control loop: sensors -> controller -> actuators, zero-order hold over physics substeps."""
+"""The control loop (1 ms, or a generic rig's own period): sensors -> controller -> actuators,
+zero-order hold over physics substeps."""
 from __future__ import annotations
 
 import inspect
