@@ -15,5 +15,9 @@ from .observer import Observer, make_observer  # noqa: E402
 from .passivity import Passivity, make_passivity  # noqa: E402
 CONTROLLERS["observer"] = make_observer  # thesis 5.2 observer-based recursive joint control
 CONTROLLERS["passivity"] = make_passivity  # thesis 5.1 passivity-based Cartesian PD
+from .pid import PID  # noqa: E402
+from .state_feedback import StateFeedback  # noqa: E402
+CONTROLLERS["state_feedback"] = StateFeedback  # u = K (x_ref - x) on any named channels (issue 15)
+CONTROLLERS["pid"] = PID  # PID on any named channels (issue 15)
 
-__all__ = ["CascadeP", "Controller", "OpenLoop", "PDJoint", "PDTip", "PIVelocity", "CONTROLLERS"]
+__all__ = ["CascadeP", "Controller", "OpenLoop", "PDJoint", "PDTip", "PIVelocity", "PID", "StateFeedback", "CONTROLLERS"]

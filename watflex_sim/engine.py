@@ -1,6 +1,8 @@
-"""The 1 ms control loop: sensors -> controller -> actuators, zero-order hold over physics substeps."""
+"""The control loop (1 ms, or a generic rig's own period): sensors -> controller -> actuators,
+zero-order hold over physics substeps."""
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 import time as wallclock
@@ -29,8 +31,11 @@ def make_rig(scenario: dict, model: mujoco.MjModel, data: mujoco.MjData):
     """The rig's sensors and actuators, as its description (rigs/<rig>.toml) names them."""
     rig_name = scenario["rig"]
     description = load_rig(rig_name)
+    period = scenario.get("control_period_s") or description.control_period_s
     if description.sensors == "generic":
-        return GenericRig(model, data, description, scenario["noise"], scenario["seed"])
+        return GenericRig(model, data, description, scenario["noise"], scenario["seed"], period)
+    if period != CONTROL_PERIOD:
+        raise ConfigError(f"rig {rig_name!r} runs at {CONTROL_PERIOD * 1e3:g} ms only (its sensors are not generic)")
     kwargs = {"locked": scenario["locked_joints"]} if description.sensors == "watflex" else {}
     params = segmented(rig_name, scenario["n_segments"])
     return RIG_CLASSES[description.sensors](model, data, params, scenario["noise"], scenario["seed"], **kwargs)
@@ -58,8 +63,10 @@ def substeps(control_period: float, timestep: float) -> int:
     return n
 
 
-def make_controller(scenario: dict, rig_name: str):
-    """The scenario's controller: a registered closed-loop type, or open loop from its command signals."""
+def make_controller(scenario: dict, rig_name: str, period: float = CONTROL_PERIOD):
+    """The scenario's controller: a registered closed-loop type, or open loop from its command signals.
+
+    A controller that takes a `period` and is not given one runs at the rig's (s)."""
     from .controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
 
     spec = dict(scenario["controller"])
@@ -70,6 +77,8 @@ def make_controller(scenario: dict, rig_name: str):
     if kind not in CONTROLLERS:
         raise ConfigError(f"unknown controller type {kind!r} (known: none, {', '.join(CONTROLLERS)})")
     compensation = spec.pop("compensation", None)
+    if "period" not in spec and period != CONTROL_PERIOD and "period" in inspect.signature(CONTROLLERS[kind]).parameters:
+        spec["period"] = period
     try:
         controller = CONTROLLERS[kind](**spec)
         if compensation is not None:  # [controller.compensation]: friction compensation around it
@@ -84,13 +93,12 @@ def make_controller(scenario: dict, rig_name: str):
 def _references(scenario: dict, rig_name: str) -> dict[str, Callable[[float], float]]:
     """Reference signals by channel (rad); a laser-arm 'arc_m' step is converted by the beam length."""
     sign = 1.0 if scenario["direction"] == "positive" else -1.0
-    params = rig_params(rig_name)
     out = {}
     for table in scenario["reference"]:
         table = dict(table)
         scale = 1.0
         if "arc_m" in table:  # laser spot displacement along the tip's arc (m) -> rad
-            table["amplitude"], scale = table.pop("arc_m"), 1.0 / params.beam.length
+            table["amplitude"], scale = table.pop("arc_m"), 1.0 / rig_params(rig_name).beam.length
         out[table["channel"]] = make_signal(table, sign, scale)
     return out
 
@@ -219,7 +227,7 @@ class ControlLoop:
     """A scenario set up to run: model, data, rig, joint friction, controller and references.
 
     Use it as `with ControlLoop(scenario) as loop:` (the friction callback is process-global
-    and installed only inside the block). `tick(k)` does one 1 ms period at t = k ms:
+    and installed only inside the block). `tick(k)` does control period k (the rig's, 1 ms unless it says):
     references -> sensors -> controller -> saturation/converters -> `n_sub` physics steps with
     the command held (zero-order hold), then the divergence check every CHECK_EVERY periods.
     Raises ConfigError for an impossible configuration.
@@ -245,31 +253,43 @@ class ControlLoop:
         )
         for edit in patch.model_edits:
             edit(self.model)
-        self.n_sub = substeps(CONTROL_PERIOD, self.model.opt.timestep)
+        # s: the scenario's (a recording's sidecar) sample period, else the rig's
+        self.period = period = scenario.get("control_period_s") or load_rig(rig_name).control_period_s
+        self.n_sub = substeps(period, self.model.opt.timestep)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
         self.rig = make_rig(scenario, self.model, self.data)
+        if scenario.get("initial"):  # start where a recording starts (generic rigs)
+            if not hasattr(self.rig, "start_at"):
+                raise ConfigError(f"rig {rig_name!r} cannot start from recorded values (its sensors are not generic)")
+            self.rig.start_at(scenario["initial"])
         frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(configure(frictions, scenario["joint_friction"]), patch.friction, patch.friction_add)
         self.friction = FrictionCallback(self.model, self.data, frictions)
-        self.controller = make_controller(scenario, rig_name)
+        self.controller = make_controller(scenario, rig_name, period)
+        reads = getattr(self.controller, "channels", None)  # a law on named channels says which it reads
+        unknown = sorted(set(reads()) - set(self.rig.channels)) if callable(reads) else []
+        if unknown:
+            raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
         references = _references(scenario, rig_name)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
             raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
-        self.n_ticks = int(round(scenario["duration_s"] / CONTROL_PERIOD))
+        self.n_ticks = int(round(scenario["duration_s"] / period))
         # references depend on t only: tabulate them once for every tick
-        times = [k * CONTROL_PERIOD for k in range(self.n_ticks)]
+        times = [k * period for k in range(self.n_ticks)]
         self.references = _References({c: np.array([f(t) for t in times]) for c, f in references.items()}, self.n_ticks)
         self.n_segments = getattr(segmented(rig_name, scenario["n_segments"]), "n_segments", 0)
         self.monitor = GrowthMonitor(self.model, self.n_segments)
-        self._commands = [{}] * patch.command_delay  # FIFO of commands waiting for the plant
-        self._sensor_fifo = {c: [None] * n for c, n in patch.sensor_delay.items() if n > 0}  # filled by the first reading
+        ticks = CONTROL_PERIOD / period  # delays are counted in CONTROL_PERIOD ticks (effects.delay): in ours
+        self._commands = [{}] * round(patch.command_delay * ticks)  # FIFO of commands waiting for the plant
+        self._sensor_fifo = {c: [None] * round(n * ticks) for c, n in patch.sensor_delay.items()
+                             if round(n * ticks) > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
 
@@ -282,7 +302,7 @@ class ControlLoop:
 
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
-        t = k * CONTROL_PERIOD
+        t = k * self.period
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
             obs = self._sense(obs)
@@ -300,7 +320,7 @@ class ControlLoop:
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         self.monitor.update(self.data, k)
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
-            _check_state(self.model, self.data, t + CONTROL_PERIOD)
+            _check_state(self.model, self.data, t + self.period)
         return obs, recorded
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
@@ -326,13 +346,13 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     `progress(fraction)` is called about every simulated 0.1 s.
     """
     loop = ControlLoop(scenario, parameter_names)
-    rig, n_ticks = loop.rig, loop.n_ticks
+    rig, n_ticks, period = loop.rig, loop.n_ticks, loop.period
     column = {c: j for j, c in enumerate(rig.channels)}
     table = np.full((n_ticks, len(column)), np.nan)  # preallocated: memory is what the run records
-    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * CONTROL_PERIOD))))
+    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * period))))
     frame_ticks = range(0, n_ticks, frame_every)
     frames = np.empty((len(frame_ticks), *np.shape(rig.arm_points())))
-    report_every = max(1, int(0.1 / CONTROL_PERIOD))
+    report_every = max(1, int(0.1 / period))
     start = wallclock.perf_counter()
     with loop:
         for k in range(n_ticks):
@@ -348,7 +368,7 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     wall = wallclock.perf_counter() - start
     if progress:
         progress(1.0)
-    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * CONTROL_PERIOD, wall)
+    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * period, wall)
 
     channels = {c: np.ascontiguousarray(table[:, j]) for c, j in column.items() if not np.isnan(table[:, j]).all()}
     del table
@@ -360,6 +380,7 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         "payload_kg": scenario["payload_kg"],
         "controller": controller_meta,
         "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
+        "control_period_s": period,
         "locked_joints": scenario["locked_joints"],
         "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
         "seed": scenario["seed"],
@@ -367,8 +388,8 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
         "scenario": {k: v for k, v in scenario.items() if k != "name"}
         | {"timestep": float(loop.model.opt.timestep), "n_segments": loop.n_segments},
     }
-    time = np.arange(n_ticks) * CONTROL_PERIOD
-    frame_time = np.array(frame_ticks, dtype=float) * CONTROL_PERIOD
+    time = np.arange(n_ticks) * period
+    frame_time = np.array(frame_ticks, dtype=float) * period
     return SimResult(Recording(time, channels, meta), frames, frame_time, wall)
 
 

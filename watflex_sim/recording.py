@@ -446,6 +446,8 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
             time, chans, where = _read_csv(path, rig, source)
         except OSError as err:
             raise RecordingError(source, f"cannot read {path.name}: {err.strerror or err}") from None
+    elif _split_mat(rig):
+        time, chans, where = _read_mat_split(path, rig)
     else:
         time, chans, where, scalars = _read_mat(raw, rig, source)
         meta = _fill_scalars(meta, scalars, source)
@@ -465,6 +467,59 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
         _check_samples(time / (1000.0 if unit == "ms" else 1.0), chans, source, where)
         raise
     return Recording(time, chans, meta)
+
+
+def _split_mat(rig: str) -> bool:
+    from .rigdesc import load_rig
+
+    return load_rig(rig).mat_channels is not None
+
+
+def _read_mat_split(path: Path, rig: str):
+    """A recording kept as one .mat file per signal (the rig's `mat_channels`, `mat_time`): each
+    entry names its file (a pattern with {run}, matched against `path`'s name), variable, column
+    (1-based, of an N x k array) and scale (to the channel's unit, to s for the time)."""
+    from .rigdesc import load_rig
+
+    description = load_rig(rig)
+    specs = {"time": description.mat_time, **description.mat_channels}
+    run = None
+    for spec in specs.values():
+        head, _, tail = spec["file"].partition("{run}")
+        name = path.name
+        if name.startswith(head) and name.endswith(tail) and len(name) > len(head) + len(tail):
+            run = name[len(head): len(name) - len(tail)]
+            break
+    if run is None:
+        patterns = sorted({spec["file"] for spec in specs.values()})
+        raise RecordingError(path, f"file name matches none of the rig's .mat files ({', '.join(patterns)})")
+    loaded, columns = {}, {}
+    for channel, spec in specs.items():
+        source = path.with_name(spec["file"].replace("{run}", run))
+        if source not in loaded:
+            raw = _read_bytes(source, source)
+            _check_mat(raw, source)
+            import scipy.io
+
+            try:
+                loaded[source] = scipy.io.loadmat(io.BytesIO(raw))
+            except Exception as err:  # scipy raises a zoo of types on corrupt files
+                cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+                raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
+        mat, variable = loaded[source], spec["variable"]
+        if variable not in mat:
+            raise RecordingError(source, f"no variable {variable!r} (for {channel!r})")
+        array = np.asarray(mat[variable])
+        column = int(spec.get("column", 1))
+        if array.ndim != 2 or not 1 <= column <= array.shape[1]:
+            raise RecordingError(source, f"variable {variable!r} (shape {array.shape}) has no column {column} (for {channel!r})")
+        columns[channel] = _as_vector(array[:, column - 1], f"variable {variable!r} column {column}", source) \
+            * float(spec.get("scale", 1.0))
+        if columns[channel].size != columns["time"].size:
+            raise RecordingError(source, f"variable {variable!r} has {columns[channel].size} samples, "
+                                         f"the time ({description.mat_time['file'].replace('{run}', run)}) has {columns['time'].size}")
+    time = columns.pop("time")
+    return time, columns, lambda i: f"sample {i}"
 
 
 def _fill_scalars(meta, scalars: dict, source):

@@ -7,7 +7,6 @@ import numpy as np
 
 from .engine import simulate
 from .model import ConfigError
-from .params import CONTROL_PERIOD
 from .recording import Recording
 from .rigdesc import load_rig
 from .scenario import DEFAULTS, check
@@ -22,15 +21,18 @@ def scenario_from_recording(rec: Recording) -> dict:
     meta, description = rec.meta, load_rig(rec.rig)
     scenario = copy.deepcopy(DEFAULTS)
     time = rec.time - rec.time[0]
+    period = float(meta.get("control_period_s") or description.control_period_s)  # s: the sidecar's, else the rig's
     scenario.update(
         rig=rec.rig, experiment=meta.get("experiment", "recording"), name=meta.get("experiment", "recording"),
-        duration_s=float(round(time[-1] / CONTROL_PERIOD) + 1) * CONTROL_PERIOD,
+        duration_s=float(round(time[-1] / period) + 1) * period,
         payload_kg=float(meta.get("payload_kg", 0.0)), locked_joints=dict(meta.get("locked_joints", {})),
-        noise=False, seed=0,
+        noise=False, seed=0, control_period_s=period,
     )
     for key in ("tilt_rad", "actuator_bench", "friction", "joint_friction", "timestep"):
         if key in meta.get("scenario", {}):  # our own recordings say how they were made
             scenario[key] = meta["scenario"][key]
+    if description.sensors == "generic":  # start where the recording starts (its first finite samples)
+        scenario["initial"] = {c: _first(rec.channels[c]) for c in description.of_kind("measured") if c in rec.channels}
     inputs = [c for c in description.of_kind("reference") + description.of_kind("disturbance") if c in rec.channels]
     scenario["reference"] = [_samples(c, time, rec.channels[c]) for c in inputs]
     mode = meta.get("mode", "closed_loop")
@@ -46,6 +48,11 @@ def scenario_from_recording(rec: Recording) -> dict:
     return check(scenario)
 
 
+def _first(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite[0]) if finite.size else float("nan")
+
+
 def _samples(channel: str, time: np.ndarray, values: np.ndarray) -> dict:
     return {"channel": channel, "kind": "samples", "time_s": time.tolist(), "values": values.tolist()}
 
@@ -57,7 +64,7 @@ def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None
     With `until` (s from the start) the simulation stops there; later samples hold its last value."""
     scenario = scenario_from_recording(rec)
     if until is not None:
-        scenario["duration_s"] = min(scenario["duration_s"], until + 2 * CONTROL_PERIOD)
+        scenario["duration_s"] = min(scenario["duration_s"], until + 2 * scenario["control_period_s"])
     scenario["effects"] = list(effects)
     scenario["parameters"] = dict(parameters or {})
     sim = simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording

@@ -27,6 +27,7 @@ from pathlib import Path
 import mujoco
 
 from .model import ROOT, ConfigError, read_toml
+from .params import CONTROL_PERIOD
 
 RIGS_DIR = ROOT / "rigs"  # the bundled rigs
 ENV = "WATFLEX_RIGS"
@@ -38,7 +39,16 @@ UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "
 CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "measured", "output",
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
-        "mat_scalars", "sidecar", "description")
+        "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
+        "datasheet")  # datasheet: free numbers a model generator reads (tools/build_quanser.py)
+# What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
+# velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
+QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
+# Keys a channel may have (rigs.GenericRig reads them; the other sensor models read unit, kind, noise).
+CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", "step", "noise", "filter_hz",
+                "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
+                "current_per_unit"}  # A per command unit: a command limit also reported as a current
+MAT_KEYS = {"file", "variable", "column", "scale"}
 
 
 @dataclass(frozen=True)
@@ -51,6 +61,9 @@ class RigDescription:
     parameters: dict  # name -> {knob, target, tolerance}
     effects: dict  # effect id -> [where, ...]
     time_variable: str = "time"  # .mat variable with the time in s
+    mat_channels: dict | None = None  # channel -> {file, variable, column?, scale?}: one .mat file per signal
+    mat_time: dict | None = None  # {file, variable, column?, scale?}: where the time is (scale to s)
+    control_period_s: float = CONTROL_PERIOD  # s, the rig's sample period (controller and sensors)
     mat_scalars: tuple = ()  # 1x1 .mat variables kept for the sidecar ("mat:NAME")
     sidecar: dict | None = None  # default sidecar for files that come without one (--rig)
     description: str = ""
@@ -108,10 +121,20 @@ def _check(raw: dict, source: str, default_name: str) -> RigDescription:
     if not isinstance(raw["channels"], dict) or not raw["channels"]:
         fail("channels must be a table channel = {unit, kind, ...}")
     for channel, spec in raw["channels"].items():
-        if not isinstance(spec, dict) or "unit" not in spec or spec.get("kind") not in KINDS:
-            fail(f"channel {channel!r} needs a unit and a kind among {', '.join(KINDS)}")
+        _check_channel(channel, spec, fail, raw["sensors"] == "generic")
         if spec["unit"] not in UNITS:
             fail(f"channel {channel!r}: unit {spec['unit']!r} is not one of {', '.join(UNITS)}")
+    for channel, spec in {**raw.get("mat_channels", {}), "(mat_time)": raw.get("mat_time", {"file": "", "variable": ""})}.items():
+        if channel != "(mat_time)" and channel not in raw["channels"]:
+            fail(f"mat_channels: {channel!r} is not a channel of the rig")
+        if not isinstance(spec, dict) or set(spec) - MAT_KEYS or not {"file", "variable"} <= set(spec):
+            fail(f"mat_channels/mat_time {channel!r} needs file and variable (and may have column, scale)")
+    if "mat_channels" in raw and "mat_time" not in raw:
+        fail("mat_channels needs mat_time (where the time is)")
+    period = raw.get("control_period_s", CONTROL_PERIOD)
+    steps = period / CONTROL_PERIOD if isinstance(period, (int, float)) and not isinstance(period, bool) else 0
+    if steps < 1 or abs(steps - round(steps)) > 1e-9:
+        fail(f"control_period_s must be a whole multiple of {CONTROL_PERIOD:g} s, got {period!r}")
     for name, spec in raw.get("parameters", {}).items():
         if not isinstance(spec, dict) or spec.get("knob") not in KNOBS or "target" not in spec \
                 or not 0 < spec.get("tolerance", -1) < 1:
@@ -136,7 +159,8 @@ def _check(raw: dict, source: str, default_name: str) -> RigDescription:
         controller=tables["controller"], parameters=raw.get("parameters", {}),
         effects=raw.get("effects", {}), time_variable=raw.get("time_variable", "time"),
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
-        description=raw.get("description", ""), source=source,
+        description=raw.get("description", ""), source=source, mat_channels=raw.get("mat_channels"),
+        mat_time=raw.get("mat_time"), control_period_s=float(period),
     )
     if description.sensors == "generic":
         _check_model(description, fail)
@@ -161,6 +185,42 @@ def _check_model(description: RigDescription, fail) -> None:
             if unit and spec["unit"] != unit:
                 fail(f"channel {channel!r}: unit {spec['unit']!r} for the position of joint {spec['joint']!r}, "
                      f"which is measured in {unit}")
+
+
+def _check_channel(channel: str, spec, fail, generic: bool) -> None:
+    """One channel table: unit, kind, known keys; a measured generic channel names what it reads."""
+    if not isinstance(spec, dict) or "unit" not in spec or spec.get("kind") not in KINDS:
+        fail(f"channel {channel!r} needs a unit and a kind among {', '.join(KINDS)}")
+    unknown = set(spec) - CHANNEL_KEYS
+    if unknown:
+        fail(f"channel {channel!r}: unknown key(s) {', '.join(sorted(unknown))}")
+    for key in ("scale", "offset", "step", "noise", "filter_hz", "filter_zeta", "length", "x", "thickness", "gain", "limit",
+                "range", "bits"):
+        if key in spec and (isinstance(spec[key], bool) or not isinstance(spec[key], (int, float))):
+            fail(f"channel {channel!r}: {key} must be a number, got {spec[key]!r}")
+    for key in ("step", "noise", "filter_hz"):
+        if spec.get(key, 0) < 0:
+            fail(f"channel {channel!r}: {key} must be >= 0, got {spec[key]!r}")
+    for key in ("filter_zeta", "length", "thickness", "limit", "range", "bits"):
+        if spec.get(key, 1) <= 0:
+            fail(f"channel {channel!r}: {key} must be > 0, got {spec[key]!r}")
+    if spec.get("scale", 1) == 0:
+        fail(f"channel {channel!r}: scale must not be 0")
+    quantity = spec.get("quantity", "position")
+    if quantity not in QUANTITIES:
+        fail(f"channel {channel!r}: quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
+    if not generic or spec["kind"] != "measured":
+        return
+    if "joint" not in spec and "link" not in spec:
+        fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain)")
+    if quantity in ("deflection", "deflection_angle", "strain") and "link" not in spec:
+        fail(f"channel {channel!r}: quantity {quantity!r} needs a link")
+    if quantity in ("position", "velocity") and "joint" not in spec:
+        fail(f"channel {channel!r}: quantity {quantity!r} needs a joint")
+    if quantity == "strain" and not {"thickness", "length"} <= set(spec):
+        fail(f"channel {channel!r}: a strain needs the link's thickness and length (m)")
+    if quantity == "deflection" and "length" not in spec:
+        fail(f"channel {channel!r}: a tip deflection needs the link's length (m)")
 
 
 @cache

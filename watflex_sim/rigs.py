@@ -246,50 +246,157 @@ class WatflexRig(Rig):
 
 
 class GenericRig(Rig):
-    """A rig from its description alone (rigdesc): joint-position sensors, commands, references
-    and disturbances as the channel table says (rigs/emps.toml is one)."""
+    """A rig from its description alone (rigdesc): sensors, commands, references and
+    disturbances as the channel table says (rigs/emps.toml, rigs/quanser_2dsfl.toml).
 
-    def __init__(self, model, data, description, noise: bool, seed: int):
+    A measured channel reads `quantity` (rigdesc.QUANTITIES) of a joint or a link, then
+    value = scale * quantity + offset + noise, low-passed at filter_hz (1st order, or 2nd with
+    filter_zeta), quantised to step.
+    A link is the hinge joint named `link` or the chain `link_j01, link_j02, ...`; its tip
+    deflection (m) is sum q_i (length - x_i) with x_i the hinge's distance from the first one,
+    its angle that over length, and the strain at x the static tip-load shape's,
+    3 t w_tip (length - x) / (2 length^3) (a cantilever with a tip force).
+    """
+
+    def __init__(self, model, data, description, noise: bool, seed: int, period: float | None = None):
         super().__init__(model, data, description, noise, seed)
         self.name = description.name
         self.channels = tuple(description.channels)
         self.command_channels = tuple(description.of_kind("command"))
         self._inputs = tuple(description.of_kind("reference") + description.of_kind("disturbance"))
+        self._period = period or description.control_period_s  # s, the sample period the filters run at
         self._measured, self._commands, self._disturbances = [], {}, {}
+        mujoco.mj_kinematics(model, data)
         for channel, spec in description.channels.items():
             if spec["kind"] == "measured":
-                q = self._qpos(spec["joint"])
-                if q is None:
-                    continue
-                self._measured.append((channel, q, float(spec.get("step", 0.0)), self.noise * float(spec.get("noise", 0.0))))
+                sensor = self._sensor(spec)
+                if sensor is not None:
+                    self._measured.append((channel, *sensor))
             elif spec["kind"] == "command":
                 self._commands[channel] = (model.actuator(spec["actuator"]).id, float(spec.get("gain", 1.0)),
-                                           float(spec.get("limit", math.inf)))
+                                           float(spec.get("limit", math.inf)), _converter_step(spec))
             elif spec["kind"] == "disturbance":
                 self._disturbances[channel] = self._dof(spec["joint"])
-        self.command_actuators = {c: a for c, (a, _g, _l) in self._commands.items()}
-        self.command_scale = {c: g for c, (_a, g, _l) in self._commands.items()}
+        self.command_actuators = {c: a for c, (a, *_rest) in self._commands.items()}
+        self.command_scale = {c: g for c, (_a, g, *_rest) in self._commands.items()}
+        self._filtered: dict[str, tuple[list, list]] = {}  # channel -> (inputs, outputs) of its filter
+
+    def _link(self, spec) -> list[tuple[int, int, float]]:
+        """(qpos, dof, lever arm m) of each hinge of link spec['link'] (empty if not in the model)."""
+        name = spec["link"]
+        ids = [j for j in range(self.model.njnt) if self.model.joint(j).name == name
+               or self.model.joint(j).name.startswith(f"{name}_j")]
+        if not ids:
+            return []
+        anchors = [self.data.xanchor[j].copy() for j in ids]
+        length = float(spec.get("length", 1.0))
+        return [(int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]),
+                 length - float(np.linalg.norm(a - anchors[0]))) for j, a in zip(ids, anchors)]
+
+    def _sensor(self, spec):
+        """(kind, index/weights, scale, offset, step, noise, filter coefficient) or None if absent."""
+        quantity = spec.get("quantity", "position")
+        scale, offset = float(spec.get("scale", 1.0)), float(spec.get("offset", 0.0))
+        step, noise = float(spec.get("step", 0.0)), self.noise * float(spec.get("noise", 0.0))
+        alpha = _low_pass(float(spec.get("filter_hz", 0.0)), spec.get("filter_zeta"), self._period)
+        if quantity in ("position", "velocity"):
+            index = self._qpos(spec["joint"]) if quantity == "position" else self._dof(spec["joint"])
+            if index is None:
+                return None
+            return quantity, index, scale, offset, step, noise, alpha
+        hinges = self._link(spec)
+        if not hinges:
+            return None
+        length = float(spec.get("length", 1.0))
+        per_metre = {"deflection": 1.0, "deflection_angle": 1.0 / length,
+                     "strain": 3 * float(spec.get("thickness", 0.0)) * (length - float(spec.get("x", 0.0))) / (2 * length**3)}
+        if quantity == "deflection_angle" and len(hinges) == 1:  # a torsional-spring link: its angle
+            weights = [(hinges[0][0], 1.0)]
+        else:
+            weights = [(q, arm * per_metre[quantity]) for q, _d, arm in hinges]
+        return "link", weights, scale, offset, step, noise, alpha
 
     @property
     def input_channels(self) -> tuple[str, ...]:
         return self._inputs
 
     def observe(self, reference: dict[str, float]) -> dict[str, float]:
-        """References and disturbances as given (disturbances also applied as force), then positions."""
+        """References and disturbances as given (disturbances also applied as force), then the sensors."""
         obs = {c: reference.get(c, 0.0) for c in self._inputs}
         for channel, dof in self._disturbances.items():
             self.data.qfrc_applied[dof] = obs[channel]
-        qpos = self.data.qpos.tolist()
-        for channel, q, step, noise in self._measured:
-            value = qpos[q] + (noise * self.gauss() if noise else 0.0)
+        qpos, qvel = self.data.qpos.tolist(), self.data.qvel.tolist()
+        for channel, kind, index, scale, offset, step, noise, alpha in self._measured:
+            if kind == "position":
+                x = qpos[index]
+            elif kind == "velocity":
+                x = qvel[index]
+            else:
+                x = sum(w * qpos[q] for q, w in index)
+            value = scale * x + offset + (noise * self.gauss() if noise else 0.0)
+            if alpha is not None:
+                value = self._filter(channel, alpha, value)
             obs[channel] = quantise(value, step) if step else value
         return obs
 
+    def _filter(self, channel: str, coefficients, value: float) -> float:
+        """One sample of a channel's low-pass (b, a: direct form, at rest at its first input)."""
+        b, a = coefficients
+        x, y = self._filtered.setdefault(channel, ([value] * len(b), [value] * (len(a) - 1)))
+        x.insert(0, value)
+        x.pop()
+        out = sum(bi * xi for bi, xi in zip(b, x)) - sum(ai * yi for ai, yi in zip(a[1:], y))
+        if y:
+            y.insert(0, out)
+            y.pop()
+        return out
+
+    def start_at(self, first: dict[str, float]) -> None:
+        """Set the state so the sensors read `first` (channel -> value; noise, filter and steps aside):
+        joint positions and velocities, and each link bent in its static tip-load shape."""
+        for channel, kind, index, scale, offset, _step, _noise, _alpha in self._measured:
+            if channel not in first or not math.isfinite(first[channel]):
+                continue
+            x = (first[channel] - offset) / scale
+            if kind == "position":
+                self.data.qpos[index] = x
+            elif kind == "velocity":
+                self.data.qvel[index] = x
+            else:  # q_i = c w_i with sum w_i q_i = x: the least-norm shape, a tip-load shape for a chain
+                norm = sum(w * w for _q, w in index)
+                for q, w in index:
+                    self.data.qpos[q] = x * w / norm
+        mujoco.mj_forward(self.model, self.data)
+
     def actuate(self, command: dict[str, float]) -> dict[str, float]:
-        """Each command clipped to its limit (its unit), times its gain into the actuator."""
+        """Each command clipped to its limit and converter (its unit), times its gain into the actuator."""
         out = {}
-        for channel, (actuator, gain, limit) in self._commands.items():
+        for channel, (actuator, gain, limit, step) in self._commands.items():
             u = clip(float(command.get(channel, 0.0)), limit)
+            if step:
+                u = quantise(u, step)
             self.data.ctrl[actuator] = gain * u
             out[channel] = u
         return out
+
+
+def _low_pass(hz: float, zeta, period: float):
+    """(b, a) of a sensor's low-pass at `hz` (Hz) sampled every `period` (s): 1st order, or 2nd order
+    wn^2 / (s^2 + 2 zeta wn s + wn^2) with `zeta` (Tustin); None without a filter."""
+    if not hz:
+        return None
+    wn = 2 * math.pi * hz
+    if zeta is None:
+        alpha = 1.0 - math.exp(-wn * period)
+        return [alpha], [1.0, alpha - 1.0]
+    from scipy import signal
+
+    b, a = signal.bilinear([wn * wn], [1.0, 2 * float(zeta) * wn, wn * wn], fs=1.0 / period)
+    return [float(v) for v in b], [float(v) for v in a]
+
+
+def _converter_step(spec: dict) -> float:
+    """A command's converter resolution (its unit): 2 range / 2^bits, 0 without `bits`."""
+    if "bits" not in spec:
+        return 0.0
+    return 2 * float(spec.get("range", spec.get("limit", 1.0))) / 2 ** int(spec["bits"])

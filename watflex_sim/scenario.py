@@ -34,6 +34,8 @@ DEFAULTS = {
     "frame_rate_hz": 50.0,  # Hz, arm drawings sent to rerun
     "effects": [],  # catalogue effects added to the nominal model (effects.py, recordings.md)
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
+    "control_period_s": 0.0,  # s, sample period of sensors and controller; 0 = the rig's (rigs/<rig>.toml)
+    "initial": {},  # channel -> first recorded value: the run starts in that state (generic rigs)
     "notes": "",
 }
 
@@ -186,6 +188,11 @@ def check(scenario: dict) -> dict:
         raise ConfigError("parameters must be a table name = ratio")
     for name, ratio in scenario["parameters"].items():
         _number_in(f"parameters.{name}", ratio, 0.0, 1e3, "(ratio to nominal)", False)
+    period = scenario["control_period_s"]
+    if isinstance(period, bool) or not isinstance(period, (int, float)) or not (0 <= period <= 1.0):
+        raise ConfigError(f"control_period_s must be 0 (the rig's) or a number of seconds in (0, 1], got {period!r}")
+    if not isinstance(scenario["initial"], dict):
+        raise ConfigError("initial must be a table channel = value")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):

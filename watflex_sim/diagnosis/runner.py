@@ -2,8 +2,8 @@
 
 Contract: every worker holds the diagnosis' `Data` (set once by `Runner`); a job is one recording
 simulated with one `Model`. MuJoCo callbacks are process-global, so each process runs one simulation
-at a time. A model that diverges gives None, never an exception. `Runner.close` on an interrupt
-(Ctrl-C) kills the workers at once instead of waiting for their simulations.
+at a time. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner`
+ends them at once when the diagnosis is interrupted or fails (interrupts.stop_pool).
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 import numpy as np
 
 from ..engine import SimulationError
+from ..interrupts import stop_pool, worker_init
 from ..recording import Recording
 from ..resim import resimulate
 from .data import Data, Model, in_part, residual_vector
@@ -86,7 +87,8 @@ class Runner:
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
-        self.pool = ProcessPoolExecutor(workers, initializer=hold, initargs=(data,)) if workers > 1 else None
+        self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C
+                     if workers > 1 else None)
 
     def map(self, fn, jobs: list) -> list:
         """fn over jobs, in order; reports progress as jobs finish."""
@@ -107,19 +109,16 @@ class Runner:
         sims = self.map(_simulate_one, [(model, i) for i in range(len(self.data.recordings))])
         return None if any(s is None for s in sims) else sims
 
-    def close(self, interrupted: bool = False) -> None:
-        if self.pool is None:
-            return
-        if interrupted:  # Ctrl-C: do not wait for simulations in flight
-            for process in list(getattr(self.pool, "_processes", {}).values()):
-                process.kill()
-        self.pool.shutdown(wait=not interrupted, cancel_futures=True)
+    def close(self, abort: bool = False) -> None:
+        """Shut the pool down; on `abort` (Ctrl-C, an error) end its processes at once."""
+        if self.pool is not None:
+            stop_pool(self.pool) if abort else self.pool.shutdown(cancel_futures=True)
 
     def __enter__(self) -> "Runner":
         return self
 
     def __exit__(self, kind, *exc) -> None:
-        self.close(interrupted=kind is not None and issubclass(kind, KeyboardInterrupt))
+        self.close(abort=kind is not None)
 
 
 def evaluator(runner: Runner | None):

@@ -1,0 +1,52 @@
+"""PID on named channels, as data (issue 15 item 3)."""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+from watflex_sim.params import CONTROL_PERIOD
+
+from .state_feedback import RateFilter
+
+
+class PID:
+    """u = kp e + ki integral(e) - kd d(position)/dt - kl deflection, e = reference - position.
+
+    Channels by name: `command`, `position`, `reference`, and optionally `deflection` (a link's
+    deflection channel, gain kl). The rate is the filtered difference of `position` (RateFilter
+    at rate_hz, rate_zeta, rate_method). The output is clipped to +-limit (command units; the integral stops
+    while clipped) and optionally low-passed (command_filter_hz, 1st order). period in s.
+    """
+
+    def __init__(self, command: str, position: str, reference: str, kp: float, ki: float = 0.0,
+                 kd: float = 0.0, deflection: str = "", kl: float = 0.0, rate_hz: float = 0.0,
+                 rate_zeta: float = 0.7071, rate_method: str = "backward_diff", limit: float = math.inf, command_filter_hz: float = 0.0,
+                 period: float = CONTROL_PERIOD):
+        self.command, self.position, self.reference, self.deflection = command, position, reference, deflection
+        self.kp, self.ki, self.kd, self.kl, self.limit = float(kp), float(ki), float(kd), float(kl), float(limit)
+        self.period = float(period)
+        self.rate = RateFilter(float(rate_hz), float(rate_zeta), self.period, rate_method)
+        self.alpha = 1.0 - math.exp(-2 * math.pi * command_filter_hz * self.period) if command_filter_hz else 1.0
+        self.reset()
+
+    def reset(self) -> None:
+        self.rate.reset()
+        self.integral, self._out = 0.0, None
+
+    def channels(self) -> set[str]:
+        """The measured channels the law reads."""
+        return {self.position, self.reference} | ({self.deflection} if self.deflection else set())
+
+    def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
+        q = obs[self.position]
+        e = obs[self.reference] - q
+        u = self.kp * e + self.ki * self.integral - self.kd * self.rate(q)
+        if self.deflection:
+            u -= self.kl * obs[self.deflection]
+        clipped = max(-self.limit, min(self.limit, u))
+        if clipped == u:  # anti-windup: integrate only while not saturated
+            self.integral += e * self.period
+        if self.alpha < 1.0:
+            clipped = clipped if self._out is None else self._out + self.alpha * (clipped - self._out)
+            self._out = clipped
+        return {self.command: clipped}
