@@ -47,7 +47,7 @@ def test_truth_schema(bench):
     assert truth["format"] == "flexarm-benchmark/1" and truth["seed"] == 3
     assert truth["generator"] == "tools/make_benchmark.py"
     assert len(truth["cases"]) == 2 * (len(EFFECTS) + 1)
-    keys = ["id", "rig", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
+    keys = ["id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
             "concealment", "duration_s"]
     for case in truth["cases"]:
         assert list(case) == keys

@@ -34,7 +34,7 @@ ENV = "WATFLEX_RIGS"
 KINDS = ("reference", "measured", "command", "disturbance")
 SENSORS = ("laser_arm", "watflex", "generic")
 # SI units a channel may carry (recordings.md section 1); "1" for a dimensionless channel.
-UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "1")
+UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "1", "-", "deg", "deg/s", "mm")  # deg, mm: with a scale; "-" = "1"
 # Controller-table keys whose (string or list-of-string) values name channels of the rig.
 CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "measured", "output",
                  "channel", "channels", "states", "inputs", "outputs")
@@ -102,7 +102,7 @@ class RigDescription:
         raise ConfigError(f"{self.source}: model: no file {path}")
 
 
-def _check(raw: dict, source: str, default_name: str) -> RigDescription:
+def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     from .controllers import CONTROLLERS
     from .effects import CATALOGUE, KNOBS
 
@@ -152,6 +152,7 @@ def _check(raw: dict, source: str, default_name: str) -> RigDescription:
         for role in CHANNEL_ROLES:
             value = table.get(role)
             for name in [value] if isinstance(value, str) else value if isinstance(value, list) else []:
+                name = name.removeprefix("rate:") if isinstance(name, str) else name  # a channel's rate (state_feedback)
                 if raw["sensors"] == "generic" and name not in raw["channels"]:
                     fail(f"{where}.{role}: unknown channel {name!r} (channels: {', '.join(raw['channels'])})")
     description = RigDescription(
