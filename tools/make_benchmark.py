@@ -191,7 +191,7 @@ def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: 
     if rest_last:
         if rig == "laser_arm":
             sc = load_scenario("laser_arm_step") | {"payload_kg": 0.7}
-            sc["reference"]["arc_m"] = 0.0
+            sc["reference"][0]["arc_m"] = 0.0
         else:
             sc = load_scenario("watflex_elbow_triangle")
         runs[-1] = ("at_rest", sc)

@@ -30,7 +30,7 @@ from .screening import (FIT_ITERATIONS, SCREEN_TOP, candidates, effect_slots_of,
 MIN_GAIN = 0.02  # training noise ratio must fall by this fraction per fitted parameter, at least
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
-MIN_EXCESS_GAIN = 0.25  # an effect must remove at least this share of the validation residual above the noise
+MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
 EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
 AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
@@ -87,11 +87,12 @@ def _gains(result: dict, train_now: float, held_now: float) -> dict:
             "score": train_gain + held_gain - MIN_GAIN * result["n_params"]}
 
 
-def _earns_place(result: dict) -> bool:
-    """Training better by MIN_GAIN per parameter, validation by MIN_HELD_GAIN and by MIN_EXCESS_GAIN of
-    what it had above the noise."""
+def _earns_place(result: dict, later: bool) -> bool:
+    """Training better by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one
+    is in already) must also remove MIN_EXCESS_GAIN of what validation still has above the noise, so a
+    second effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate)."""
     return (result["train_gain"] >= MIN_GAIN * result["n_params"] and result["held_gain"] >= MIN_HELD_GAIN
-            and result["excess_gain"] >= MIN_EXCESS_GAIN)
+            and (not later or result["excess_gain"] >= MIN_EXCESS_GAIN))
 
 
 def explained_share(before: float, after: float) -> float:
@@ -160,22 +161,23 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                                "validation_noise_ratio": round(r["held_out"]["noise_ratio"], 4),
                                "score": round(r["score"], 4)} for r in fitted])
         best = fitted[0]
-        if _earns_place(best):
+        if _earns_place(best, bool(current.effects)):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
             best = _gains(polish(data, runner, best), train["noise_ratio"], held["noise_ratio"])
             room = max_effects - len(current.effects) >= 2
             alternative = offset_alternative(data, runner, current, best) if room else None
             if alternative is not None:
                 alternative = _gains(alternative, train["noise_ratio"], held["noise_ratio"])
-                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative):
+                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative, bool(current.effects)):
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
                     best, alternative = alternative, best
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
-        if not _earns_place(best):  # judged on the final (polished) model, never on a promise
+        if not _earns_place(best, bool(current.effects)):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"]})
             break
-        alternatives += [_alternative(data, r, best, len(current.effects)) for r in fitted if r is not best and r["model"] is not best["model"]
+        alternatives += [_alternative(data, r, best, len(current.effects)) for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])
+                         and r["model"].effects[len(current.effects):] != best["model"].effects[len(current.effects):]
                          and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")

@@ -30,6 +30,7 @@ SCREEN_TOP = 2  # candidates fitted in full after the signature screening (one p
 SCREEN_TIE = 0.95  # ... and any more that screen within 5 % of the last of those: a tie in the
 SCREEN_MAX = 4  # screening is no evidence (up to this many; friction laws often screen alike)
 FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one simulation each)
+EXTRAPOLATE = 2.0  # a log-scaled parameter's linear estimate goes at most this far beyond its farthest probe
 QUANTUM_STEPS = 2  # a quantised parameter tries its rounded estimate and this many steps either side
 
 
@@ -214,6 +215,9 @@ def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at
             for n, a in zip(names, x[len(free):]):
                 if n != "switch":
                     slot = cand.slots[n]
+                    if slot.log:  # a ratio acts nonlinearly: its signature is linear near its probes only
+                        reach = EXTRAPOLATE * max(abs(cand.probe(n, lv) - cand.neutral[n]) for lv in cand.levels)
+                        a = float(np.clip(a, -reach, reach))
                     value = float(np.clip(cand.neutral[n] + a, slot.low, slot.high))
                     cand.estimate[n] = value if value > 0 or not slot.log else cand.start[n]
 
