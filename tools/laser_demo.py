@@ -45,7 +45,7 @@ TRUTH = [
     dict(effect="backlash", where="hub", width=2 * SLIP_AT_TIP_M / LASER_ARM.beam.length, position=0.95),
 ]
 RUNS = [("cw_0.7kg", "positive", 0.7), ("acw_0.7kg", "negative", 0.7), ("cw_1.15kg", "positive", 1.15),
-        ("acw_1.15kg", "negative", 1.15)]  # the last one is held out by the diagnosis
+        ("acw_1.15kg", "negative", 1.15)]
 
 
 def make_recordings(out: Path, seed: int, duration: float) -> list[Path]:
@@ -66,13 +66,13 @@ def make_recordings(out: Path, seed: int, duration: float) -> list[Path]:
 def figure(recordings, report: dict, path: Path) -> None:
     """Tip sensor of the first clockwise and anticlockwise steps: measured and every stage."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=False)
-    for ax, rec, name in zip(axes, recordings[:2], report["recordings"][:2]):
+    for ax, rec, name in zip(axes, recordings[:2], [f"{stem}.csv" for stem, _, _ in RUNS[:2]]):
         t = rec.time - rec.time[0]
         keep = t <= 1.0
         ax.plot(t[keep], rec.channels["tip_sensor"][keep], color="k", lw=1.5, label="measured")
         for step, style in zip(report["steps"], ["--", ":", "-", "-."]):
             sim = resimulate(rec, step["effects"], step["parameters"], until=1.0)
-            label = f"{step['model']} (held-out NRMSE {step['held_out_nrmse']:.3f})"
+            label = f"{step['model']} (validation NRMSE {step['held_out_nrmse']:.3f})"
             ax.plot(t[keep], sim.channels["tip_sensor"][keep], style, lw=1.2, label=label)
         ax.set(title=name, xlabel="time (s)", ylabel="tip sensor (V)")
         ax.grid(alpha=0.3)
@@ -103,9 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     steps = report["steps"]
     write_report(report, recordings, args.out / "report")
     print(summary(report))
-    print("\n| stage | training NRMSE | held-out NRMSE |\n|---|---|---|")
+    print("\n| stage | training NRMSE | validation NRMSE | validation, x the noise |\n|---|---|---|---|")
     for step in steps:
-        print(f"| {step['model']} | {step['train_nrmse']:.4f} | {step['held_out_nrmse']:.4f} |")
+        print(f"| {step['model']} | {step['train_nrmse']:.4f} | {step['held_out_nrmse']:.4f} | {step['held_out_noise_ratio']:.2f} |")
     print(f"\ntruth: {TRUTH}\ndiagnosis time: {seconds:.0f} s")
     figure(recordings, report, args.figure)
     print(f"wrote {args.figure}")

@@ -75,6 +75,7 @@ def write_report(report: dict, recordings: list[Recording], directory: Path, rrd
     end (interrupts.staged), so an error or Ctrl-C leaves the previous contents, never a part."""
     directory = Path(directory)
     sims = report.pop("sims")
+    recordings = sims.get("measured", recordings)  # in the report's (canonical) order
     try:
         with staged(directory) as stage:
             _write_report(report, sims, recordings, stage, directory, rrd)

@@ -230,7 +230,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "candidates": fitted_report,
         "rejected": rejected,
         "patch": {"effects": current.effects, "parameters": current.parameters},
-        "sims": {"nominal": sims_nominal, "final": sims},
+        "sims": {"nominal": sims_nominal, "final": sims, "measured": data.recordings},  # canonical order, as "recordings"
     }
     if verdict == "unexplained":
         report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
