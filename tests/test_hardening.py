@@ -391,3 +391,17 @@ def test_viewer_opens_and_exits_cleanly_under_xvfb(name):
     proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", sys.executable, "-m", "watflex_sim.cli",
                            "view", name, "--exit-after", "1"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stderr == ""
+
+
+def test_long_recordings_are_plotted_as_bounded_envelopes():
+    """A 2-million-sample channel is drawn from at most 2 x MAX_POINTS points (the min and max of
+    each slice), and a one-sample spike still shows in it (the 200 MB CSV of issue 17 plotted in
+    2.9 GB before)."""
+    from watflex_sim.plot import MAX_POINTS, envelope
+
+    t = np.arange(2_000_000) * 1e-3
+    y = np.sin(t)
+    y[1_234_567] = 50.0
+    tt, yy = envelope(t, y)
+    assert tt.size <= 2 * MAX_POINTS and yy.max() == 50.0 and yy.min() == pytest.approx(-1.0, abs=1e-6)
+    assert np.all(np.diff(tt) >= 0)

@@ -12,6 +12,21 @@ import numpy as np  # noqa: E402
 from .recording import Recording  # noqa: E402
 from .rerun_log import channel_group  # noqa: E402
 
+MAX_POINTS = 4000  # per line: a figure ~1000 px wide shows no more; longer series are drawn as min/max envelopes
+
+
+def envelope(t: np.ndarray, y: np.ndarray, n: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) with at most about 2n points: the min and max of each of n equal slices, in time order,
+    so a peak of one sample still shows (memory and time of a plot stay bounded for any length)."""
+    if t.size <= 2 * n:
+        return t, y
+    edges = np.linspace(0, t.size, n + 1).astype(int)
+    lo = np.minimum.reduceat(y, edges[:-1])
+    hi = np.maximum.reduceat(y, edges[:-1])
+    tt = np.repeat(t[edges[:-1]], 2)
+    yy = np.column_stack([lo, hi]).ravel()
+    return tt, yy
+
 
 def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = None, title: str = "") -> Path:
     """Write a PNG of `rec` (solid) with `others` (label -> recording, dashed) overlaid.
@@ -34,12 +49,12 @@ def plot_recording(rec: Recording, path, others: dict[str, Recording] | None = N
             y = rec.channels[name]
             ok = np.isfinite(y)
             style = "." if ok.mean() < 0.5 else "-"  # sparse channels (camera) as dots
-            ax.plot(rec.time[ok], y[ok], style, color=color, lw=1.2, ms=2, label=name)
+            ax.plot(*envelope(rec.time[ok], y[ok]), style, color=color, lw=1.2, ms=2, label=name)
             for (label, other), dash in zip((others or {}).items(), ("--", ":", "-.")):
                 if name in other.channels and kinds.get(name) not in ("reference", "disturbance"):
                     yo = other.channels[name]
                     ok = np.isfinite(yo)
-                    ax.plot(other.time[ok], yo[ok], dash, color=color, lw=1.2, alpha=0.85, label=f"{name} ({label})")
+                    ax.plot(*envelope(other.time[ok], yo[ok]), dash, color=color, lw=1.2, alpha=0.85, label=f"{name} ({label})")
         ax.set_ylabel(f"{group} [{unit}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best", ncol=2)
