@@ -191,9 +191,13 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     current, sims, ablated = eliminate(data, runner, current, sims, say)
     if len(current.effects) < found:
         steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
+    train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
+    if current.effects:
+        say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")
+        current, sims = final_refit(data, runner, current, sims)
+        steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
     say("intervals", "95 % intervals from the Jacobian at the final model")
     ranges = final_intervals(data, runner, current)
-    train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []
     for i, effect in sorted(enumerate(current.effects), key=lambda ie: -ablated[ie[0]]):
@@ -218,7 +222,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "alternatives": alternatives,
         "fit_before": fit_scores(data, sims_nominal, "all"),
         "fit_after": fit_scores(data, sims, "all"),
-        "held_out": {"before": fit_scores(data, sims_nominal, "held_out"), "after": held_f, "how": data.how},
+        "held_out": {"before": fit_scores(data, sims_nominal, "held_out"), "after": held_f,
+                     "how": data.how + ("; judged before the final refit, which estimates the parameters reported "
+                                        "from all the data" if current.effects else "")},
         "refit_parameters": {n: current.parameters[n] for n in current.parameters},
         "parameters_at_bounds": at_bounds(data, current if current.parameters else refit_model),
         "parameters_not_refit": sorted(data.idle),  # the recordings do not depend on them
@@ -316,6 +322,17 @@ def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], s
         model, sims = without[worst][1], without[worst][2]
 
 
+def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording]]:
+    """The chosen model's parameters (its effects' and the rig's) refit on all the data, training and
+    validation blocks alike: the structure was chosen and judged on data the fit did not see; the
+    numbers reported are then estimated from every sample. Kept only if it does not diverge."""
+    free = effect_slots_of(data, model) + rig_slots(data)
+    refit, _, _ = levenberg(evaluator(runner, "all"), model, free, [value_of(model, s) for s in free], None,
+                            POLISH_ITERATIONS)
+    new = runner.simulate(refit)
+    return (refit, new) if new is not None else (model, sims)
+
+
 def final_intervals(data: Data, runner: Runner, model: Model) -> dict[int, dict[str, tuple[float, float]]]:
     """95 % intervals of every effect parameter of the final model: effect index -> parameter -> (low, high).
     A quantised parameter (a delay) is good to half its step."""
@@ -333,7 +350,7 @@ def final_intervals(data: Data, runner: Runner, model: Model) -> dict[int, dict[
             out.setdefault(slot.where[1], {})[slot.name] = (value, value)
     if not model.effects:
         return out
-    evaluate = evaluator(runner)
+    evaluate = evaluator(runner, "all")
     r = evaluate([model])[0]
     if r is None:
         return out

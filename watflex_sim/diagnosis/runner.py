@@ -51,24 +51,24 @@ def held() -> Data:
     return _DATA
 
 
-def _train_residual(model: Model) -> np.ndarray | None:
-    """Training residual vector of `model` on this process' data; None if it diverged."""
-    sims = simulate_all(_DATA, model, "train")
-    return None if sims is None else residual_vector(_DATA, sims)
+def _residual(model: Model, part: str = "train") -> np.ndarray | None:
+    """Residual vector of `model` on a part ('train' or 'all') of this process' data; None if it diverged."""
+    sims = simulate_all(_DATA, model, part)
+    return None if sims is None else residual_vector(_DATA, sims, part)
 
 
-def _train_piece(job: tuple[Model, int]) -> np.ndarray | None:
-    """The training residual of recording i alone (a piece of _train_residual)."""
-    model, i = job
+def _piece(job: tuple) -> np.ndarray | None:
+    """The residual of recording i alone on a part (a piece of _residual); job (model, i[, part])."""
+    model, i, part = (*job, "train")[:3]
     rec, train = _DATA.recordings[i], _DATA.train[i]
-    if not train.any():
+    if not in_part(train, part).any():
         return np.zeros(0)
     try:
-        sim = resimulate(rec, model.effects, model.parameters, until=last_time(rec, train, "train"))
+        sim = resimulate(rec, model.effects, model.parameters, until=last_time(rec, train, part))
     except SimulationError:
         return None
     sims = [sim if j == i else r for j, r in enumerate(_DATA.recordings)]  # the others give zeros
-    return residual_vector(_DATA, sims, only=i)
+    return residual_vector(_DATA, sims, part, only=i)
 
 
 def _simulate_one(job: tuple[Model, int]) -> Recording | None:
@@ -121,15 +121,15 @@ class Runner:
         self.close(abort=kind is not None)
 
 
-def evaluator(runner: Runner | None):
-    """models -> training residual vectors: in the pool (one job per model and recording) or in
-    this process."""
+def evaluator(runner: Runner | None, part: str = "train"):
+    """models -> residual vectors on a part ('train': what fits minimise; 'all': the final refit), in
+    the pool (one job per model and recording) or in this process."""
     if runner is None:
-        return lambda models: [_train_residual(m) for m in models]
+        return lambda models: [_residual(m, part) for m in models]
 
     def evaluate(models):
         n = len(runner.data.recordings)
-        pieces = runner.map(_train_piece, [(m, i) for m in models for i in range(n)])
+        pieces = runner.map(_piece, [(m, i, part) for m in models for i in range(n)])
         out = []
         for k in range(len(models)):
             mine = pieces[k * n:(k + 1) * n]
