@@ -7,6 +7,20 @@ import numpy as np
 from scipy.optimize import brentq
 
 
+def _frequencies(beam, f, n_modes: int) -> np.ndarray:
+    """The first `n_modes` roots lambda of the frequency equation f(lambda) = 0, as natural
+    frequencies omega = lambda^2 sqrt(EI / (rho L^4)) (rad/s)."""
+    roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
+    values = [f(x) for x in grid]
+    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
+        if fa * fb < 0:
+            roots.append(brentq(f, a, b, xtol=1e-14))
+            if len(roots) == n_modes:
+                break
+    lam = np.array(roots)
+    return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
+
+
 def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3) -> np.ndarray:
     """First `n_modes` natural frequencies (rad/s) of a clamped-free beam with a tip point mass.
 
@@ -22,15 +36,7 @@ def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3) -> np.ndar
         # divided by cosh to keep the function O(1) for large lambda
         return (1.0 + c * ch + mu * lam * (c * sh - s * ch)) / ch
 
-    roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
-    values = [f(x) for x in grid]
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
-        if fa * fb < 0:
-            roots.append(brentq(f, a, b, xtol=1e-14))
-            if len(roots) == n_modes:
-                break
-    lam = np.array(roots)
-    return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
+    return _frequencies(beam, f, n_modes)
 
 
 def tip_deflection(beam, force: float) -> float:
@@ -73,12 +79,4 @@ def clamped_tip_body_frequencies(beam, mass: float, offset: float, n_modes: int 
         row2 = [w3[i] + mu * lam**4 * u[i] for i in range(2)]
         return (row1[0] * row2[1] - row1[1] * row2[0]) / (ch * ch * (1.0 + mu * lam**4))  # kept O(1)
 
-    roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
-    values = [f(x) for x in grid]
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
-        if fa * fb < 0:
-            roots.append(brentq(f, a, b, xtol=1e-14))
-            if len(roots) == n_modes:
-                break
-    lam = np.array(roots)
-    return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
+    return _frequencies(beam, f, n_modes)
