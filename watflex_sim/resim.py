@@ -58,11 +58,14 @@ def _samples(channel: str, time: np.ndarray, values: np.ndarray) -> dict:
 
 
 def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None = None,
-               until: float | None = None) -> Recording:
+               until: float | None = None, noise_seed: int | None = None) -> Recording:
     """Simulate `rec`'s experiment with `effects` and refit `parameters`; channels sampled at rec.time.
 
-    With `until` (s from the start) the simulation stops there; later samples hold its last value."""
+    With `until` (s from the start) the simulation stops there; later samples hold its last value.
+    With `noise_seed` the rig's measurement noise is on (fed back through the controller as on the rig)."""
     scenario = scenario_from_recording(rec)
+    if noise_seed is not None:
+        scenario.update(noise=True, seed=int(noise_seed))
     if until is not None:
         scenario["duration_s"] = min(scenario["duration_s"], until + 2 * scenario["control_period_s"])
     scenario["effects"] = list(effects)

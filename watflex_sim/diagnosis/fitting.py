@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..engine import SimulationError
-from .data import Data, Model, noise_cost
+from .data import Data, Model
 from .runner import evaluator, hold
 
 log = logging.getLogger(__name__)
@@ -111,6 +111,8 @@ def huber_threshold(r: np.ndarray) -> float:
 def huber_cost(r: np.ndarray, k: float) -> float:
     """Sum of Huber's loss: r^2/2 within k, k|r| - k^2/2 beyond."""
     a = np.abs(r)
+    if not math.isfinite(k):
+        return float(0.5 * np.sum(a * a))
     return float(np.sum(np.where(a <= k, 0.5 * a * a, k * a - 0.5 * k * k)))
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from ..model import ConfigError
 from ..recording import Recording
-from .data import Data, Model, fit_scores, noise_cost, noise_nrmse, prepare, residual_vector
+from .data import Data, Model, add_closed_loop_noise, fit_scores, noise_nrmse, prepare, residual_vector
 from .explain import finding, units_at
 from .fitting import Slot, intervals, jacobian, levenberg, rig_slots, value_of
 from .locate import locate
@@ -35,6 +35,7 @@ EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above t
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
 AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
 POLISH_ITERATIONS = 6
+NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
 REFIT_ITERATIONS = 8
 KNOB_OF = {"sensor_gain": "sensor_gain", "actuator_gain": "actuator_gain", "link_stiffness_change": "chain_stiffness",
            "structural_damping": "chain_damping"}  # effects that turn a knob the rig may refit: within tolerance, not physics
@@ -119,10 +120,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     data.idle = frozenset(s.name for s, column in zip(free, rig_columns.T) if not np.any(column))
     live = [i for i, s in enumerate(free) if s.name not in data.idle]
     free, at, rig_columns = [free[i] for i in live], at[live], rig_columns[:, live]
-    current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal, noise_cost(data))[0] if free else nominal
+    current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal)[0] if free else nominal
     sims = runner.simulate(current)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
+    say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
+    noisy = runner.simulate(current, noise_seed=NOISE_SEED)
+    if noisy is not None:
+        add_closed_loop_noise(data, sims, noisy)
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
     mismatch = locate(data, sims)
@@ -152,7 +157,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
         results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [_gains(r, train["noise_ratio"], held["noise_ratio"]) for r in results if "error" not in r]
+        fitted = [_gains(scored(data, r, r["sims"]), train["noise_ratio"], held["noise_ratio"])  # scored here: the
+                  for r in results if "error" not in r]  # workers' copies of the data lack the closed-loop noise
         if not fitted:
             break
         fitted.sort(key=lambda r: (-r["score"], r["effect"], r["where"]))
@@ -385,8 +391,7 @@ def polish(data: Data, runner: Runner, result: dict) -> dict:
     each simulation split over the workers; keep it if the training fit improved."""
     free = result["free"]
     start = [value_of(result["model"], s) for s in free]
-    model, cost, J = levenberg(evaluator(runner), result["model"], free, start, None, POLISH_ITERATIONS,
-                               floor=noise_cost(data))
+    model, cost, J = levenberg(evaluator(runner), result["model"], free, start, None, POLISH_ITERATIONS)
     if [value_of(model, s) for s in free] == start:  # no step was an improvement
         return result
     sims = runner.simulate(model)
@@ -415,7 +420,7 @@ def offset_alternative(data: Data, runner: Runner, base: Model, result: dict) ->
             Slot(("effect", i + 1, "offset"), -2 * abs(a - b) / gain, 2 * abs(a - b) / gain)] + rig_slots(data)
     x0 = [(a + b) / 2, (b - a) / 2 / gain] + [value_of(trial, s) for s in rig_slots(data)]
     try:
-        model, cost, J = levenberg(evaluator(runner), trial, free, x0, iters=12, floor=noise_cost(data))
+        model, cost, J = levenberg(evaluator(runner), trial, free, x0, iters=12)
     except Exception:  # noqa: BLE001 - the alternative diverging just means it is not taken
         return None
     sims = runner.simulate(model)

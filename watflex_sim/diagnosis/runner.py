@@ -71,10 +71,10 @@ def _piece(job: tuple) -> np.ndarray | None:
     return residual_vector(_DATA, sims, part, only=i)
 
 
-def _simulate_one(job: tuple[Model, int]) -> Recording | None:
-    model, i = job
+def _simulate_one(job: tuple) -> Recording | None:
+    model, i, noise_seed = (*job, None)[:3]
     try:
-        return resimulate(_DATA.recordings[i], model.effects, model.parameters)
+        return resimulate(_DATA.recordings[i], model.effects, model.parameters, noise_seed=noise_seed)
     except SimulationError:
         return None
 
@@ -104,9 +104,10 @@ class Runner:
             self.jobs_done(done, len(jobs))
         return [f.result() for f in futures]
 
-    def simulate(self, model: Model) -> list[Recording] | None:
-        """Every recording re-simulated with `model` (one job per recording); None if one diverged."""
-        sims = self.map(_simulate_one, [(model, i) for i in range(len(self.data.recordings))])
+    def simulate(self, model: Model, noise_seed: int | None = None) -> list[Recording] | None:
+        """Every recording re-simulated with `model` (one job per recording; with `noise_seed` the rig's
+        measurement noise on); None if one diverged."""
+        sims = self.map(_simulate_one, [(model, i, noise_seed) for i in range(len(self.data.recordings))])
         return None if any(s is None for s in sims) else sims
 
     def close(self, abort: bool = False) -> None:

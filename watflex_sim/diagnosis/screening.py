@@ -18,7 +18,7 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..recording import Recording
-from .data import Data, Model, STRIDE, fit_scores, noise_cost, scale_of
+from .data import Data, Model, STRIDE, fit_scores, scale_of
 from .fitting import Slot, jacobian, levenberg, rig_slots, unpack, value_of
 from .runner import evaluator, held, simulate_all
 
@@ -289,8 +289,7 @@ def fit_candidate(args) -> dict:
             return {**failed, "error": "diverges at its starting values"}
         known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
         J = jacobian(evaluate, trial, free, u0, r, known)
-        model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r,
-                                   noise_cost(data))
+        model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r)
     except Exception as exc:  # noqa: BLE001 - a candidate that fails is dropped and reported, never fatal
         text = str(exc).splitlines()[0] if str(exc) else ""
         return {**failed, "error": f"{type(exc).__name__}: {text}"}
