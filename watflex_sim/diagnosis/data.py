@@ -137,13 +137,19 @@ def add_closed_loop_noise(data: Data, clean: list[Recording], noisy: list[Record
     """Raise each channel's noise to what the rig's measurement noise alone leaves in closed loop: the
     RMS difference between the model simulated with its noise on and off. Fed back through the
     controller, sensor noise moves the rig itself (with stick-slip, where a joint comes to rest), so a
-    perfect model is off by more than the sensor noise; open loop, this is the sensor noise."""
-    for i, (a, b) in enumerate(zip(clean, noisy)):
+    perfect model is off by more than the sensor noise; open loop, this is the sensor noise. The rig
+    description's noise model is checked against the recording: where the simulated channel jitters
+    more than the recorded one (its measured_noise), the floor is scaled down by that ratio (a white
+    noise declared on an encoder that is really quantised would otherwise pass through a velocity loop
+    as volts of jitter the recording does not have, and hide real misfits)."""
+    for i, (rec, a, b) in enumerate(zip(data.recordings, clean, noisy)):
         for c in data.channels[i]:
             d = (np.asarray(b.channels[c]) - np.asarray(a.channels[c]))
             d = d[np.isfinite(d)]
             if d.size:
-                data.noise[i][c] = max(data.noise[i][c], float(np.sqrt(np.mean(d**2))))
+                simulated, recorded = measured_noise(np.asarray(b.channels[c])), measured_noise(rec.channels[c])
+                scale = min(1.0, recorded / simulated) if simulated > 0 else 1.0
+                data.noise[i][c] = max(data.noise[i][c], scale * float(np.sqrt(np.mean(d**2))))
 
 
 def in_part(train: np.ndarray, part: str) -> np.ndarray:
