@@ -157,8 +157,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
         results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [_gains(scored(data, r, r["sims"]), train["noise_ratio"], held["noise_ratio"])  # scored here: the
-                  for r in results if "error" not in r]  # workers' copies of the data lack the closed-loop noise
+        fitted = [_gains(scored(data, r, r["sims"]), train["noise_ratio"], held["noise_ratio"])  # scored here, where
+                  for r in results if "error" not in r]  # the data has the closed-loop noise the workers' copies lack
         if not fitted:
             break
         fitted.sort(key=lambda r: (-r["score"], r["effect"], r["where"]))
@@ -166,24 +166,25 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                                "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
                                "validation_noise_ratio": round(r["held_out"]["noise_ratio"], 4),
                                "score": round(r["score"], 4)} for r in fitted])
-        best = fitted[0]
-        if _earns_place(best, bool(current.effects)):
+        best, later = fitted[0], bool(current.effects)
+        if _earns_place(best, later):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
             best = _gains(polish(data, runner, best), train["noise_ratio"], held["noise_ratio"])
             room = max_effects - len(current.effects) >= 2
             alternative = offset_alternative(data, runner, current, best) if room else None
             if alternative is not None:
                 alternative = _gains(alternative, train["noise_ratio"], held["noise_ratio"])
-                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative, bool(current.effects)):
+                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative, later):
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
                     best, alternative = alternative, best
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
-        if not _earns_place(best, bool(current.effects)):  # judged on the final (polished) model, never on a promise
+        if not _earns_place(best, later):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"]})
             break
-        alternatives += [_alternative(data, r, best, len(current.effects)) for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])
-                         and r["model"].effects[len(current.effects):] != best["model"].effects[len(current.effects):]
+        n = len(current.effects)
+        places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
+        alternatives += [_alternative(data, r, best, n) for r in fitted if places(r) != places(best)
                          and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")

@@ -267,7 +267,7 @@ def scored(data: Data, result: dict, sims: list[Recording]) -> dict:
 def fit_candidate(args) -> dict:
     """Fit one candidate on top of `base` together with the rig's parameters (worker process):
     start at its linear estimate, Jacobian columns of the rig's parameters from the signatures,
-    of its own parameters by finite differences there; return its scores."""
+    of its own parameters by finite differences there; return the fitted model and its simulations."""
     base, cand, rig_columns, iters, idle = args
     data = held()
     data.idle = idle  # this worker's copy of the data learns which rig parameters are idle
@@ -296,5 +296,5 @@ def fit_candidate(args) -> dict:
     sims = simulate_all(data, model)
     if sims is None:
         return {**failed, "error": "the fitted model diverges"}
-    return scored(data, {**failed, "model": model, "n_params": len(cand.slots), "cost": cost,
-                         "screen_gain": cand.gain, "free": free, "J": J}, sims)
+    return {**failed, "model": model, "n_params": len(cand.slots), "cost": cost, "screen_gain": cand.gain,
+            "free": free, "J": J, "sims": sims}  # scored by the caller, whose data knows the closed-loop noise
