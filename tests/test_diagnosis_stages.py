@@ -123,3 +123,46 @@ def test_proposed_experiment_separates_two_explanations_and_runs(laser_recording
     path = tmp_path / "discriminate.toml"
     path.write_text(to_toml(proposal["scenario_dict"], "proposed"))
     assert main(["run", str(path), "--out", str(tmp_path / "run"), "--no-plot", "--no-rrd"]) == 0
+
+
+def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
+    """Issue 14's false all-clear: a motor-current error of 1.5 x its noise on one of four channels
+    leaves the mean noise ratio near 1.1 (< 1.3) but must not pass as 'within noise'."""
+    from watflex_sim.diagnosis.data import fit_scores
+    from watflex_sim.diagnosis.pipeline import within_noise
+
+    data = prepare(laser_recordings, ["a", "b"])
+    rng = np.random.default_rng(3)
+    sims = []
+    for rec, noise in zip(data.recordings, data.noise):
+        channels = {c: v + noise[c] * rng.normal(size=v.size) if c in noise else v for c, v in rec.channels.items()}
+        channels["motor_current"] = channels["motor_current"] + 1.1 * noise["motor_current"]
+        sims.append(type(rec)(rec.time, channels, rec.meta))
+    train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+    assert train["worst_channel"] == "motor_current" and train["worst_ratio"] == pytest.approx(1.5, abs=0.1)
+    assert train["noise_ratio"] < 1.3 and not within_noise(train, held)
+
+
+def test_compass_search_crosses_a_rough_cost():
+    """A quadratic with a saw-tooth on top (stick-slip's rough cost, local minima every 0.01):
+    from 0.5 the pattern search lands within 0.02 of the minimum at 0.83."""
+    from watflex_sim.diagnosis.fitting import compass
+
+    def residual(m):
+        a = m.parameters["a"]
+        return np.array([a - 0.83, 0.02 * math.sin(2 * math.pi * a / 0.01)])
+
+    evaluate = lambda models: [residual(m) for m in models]  # noqa: E731
+    slot = [Slot(("param", "a"), 0.0, 2.0)]
+    start = Model(parameters={"a": 0.5})
+    found = compass(evaluate, start, slot, [0.5], residual(start), sweeps=12)
+    assert found.parameters["a"] == pytest.approx(0.83, abs=0.02)
+
+
+def test_a_link_stiffness_is_probed_stiffer_as_well_as_softer(laser_recordings):
+    """A stiffer link than the datasheet's (issue 14: ratio 3 read as a strain-gauge gain): the
+    candidate's probes go to 0.9, 0.6 and 2.0 x the stiffness."""
+    from watflex_sim.diagnosis.screening import make_candidate
+
+    cand = make_candidate(prepare(laser_recordings, ["a", "b"]), "link_stiffness_change", "beam")
+    assert sorted(round(v["ratio"], 3) for v in cand.probes().values()) == [0.6, 0.9, 2.0]

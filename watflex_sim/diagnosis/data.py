@@ -194,11 +194,21 @@ def noise_ratio(data: Data, sims: list[Recording] | None, part: str = "all") -> 
     return float(np.mean(ratios)) if ratios else 0.0
 
 
+def worst_channel(data: Data, sims: list[Recording], part: str = "all") -> tuple[str, float]:
+    """The channel furthest above its noise on a part, and its ratio (RMS over recordings of RMS
+    residual / noise): a mean over channels hides one channel left unexplained."""
+    per: dict[str, list[float]] = {}
+    for r in channel_ratios(data, sims, part):
+        per.setdefault(r["channel"], []).append(r["ratio"])
+    rms = {c: float(np.sqrt(np.mean(np.square(v)))) for c, v in per.items()}
+    return max(rms.items(), key=lambda cv: cv[1], default=("", 0.0))
+
+
 def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> dict:
-    """Mean NRMSE and correlation over channels and recordings (recordings.md), and the noise ratio,
-    on a part."""
+    """Mean NRMSE and correlation over channels and recordings (recordings.md), the noise ratio and the
+    channel furthest above its noise (`worst_channel`, `worst_ratio`), on a part."""
     if sims is None:
-        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf}
+        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf, "worst_channel": "", "worst_ratio": math.inf}
     errors, corrs = [], []
     for rec, sim, chans, train in zip(data.recordings, sims, data.channels, data.train):
         mask = in_part(train, part)
@@ -207,8 +217,9 @@ def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> d
         for c in chans:
             errors.append(nrmse(rec.channels[c][mask], sim.channels[c][mask]))
             corrs.append(correlation(rec.channels[c][mask], sim.channels[c][mask]))
+    worst, ratio = worst_channel(data, sims, part)
     return {"nrmse": float(np.nanmean(errors)), "correlation": float(np.nanmean(corrs)),
-            "noise_ratio": noise_ratio(data, sims, part)}
+            "noise_ratio": noise_ratio(data, sims, part), "worst_channel": worst, "worst_ratio": ratio}
 
 
 def noise_nrmse(data: Data, part: str = "all") -> float:

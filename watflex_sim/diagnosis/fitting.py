@@ -162,6 +162,36 @@ def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None 
     return model, cost, J
 
 
+def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps: int = 6,
+            first_step: float = 0.25) -> Model:
+    """Compass (pattern) search on the training cost from x0, for a cost that stick-slip makes rough:
+    each sweep simulates every slot one step up and one down (2 x len(free) models, in parallel) and
+    moves to the best if it lowers Huber's cost; a sweep that finds nothing halves the steps, which
+    start at `first_step` x each slot's span. Levenberg-Marquardt's local model can stall there (a
+    few 0.1 % of inertia decide where a stick-slipping joint stops)."""
+    lo = np.array([s.to_internal(s.low) for s in free])
+    hi = np.array([s.to_internal(s.high) for s in free])
+    u = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi)
+    k = huber_threshold(r0)
+    cost, step = huber_cost(r0, k), first_step * (hi - lo)
+    for _ in range(sweeps):
+        trials = []
+        for i in range(len(free)):
+            for sign in (1.0, -1.0):
+                v = u.copy()
+                v[i] = np.clip(v[i] + sign * step[i], lo[i], hi[i])
+                if v[i] != u[i]:
+                    trials.append(v)
+        costs = [math.inf if r is None else huber_cost(r, k)
+                 for r in evaluate([unpack([s.to_value(x) for s, x in zip(free, v)], free, base) for v in trials])]
+        best = int(np.argmin(costs)) if costs else -1
+        if best >= 0 and costs[best] < cost * (1 - 1e-3):
+            u, cost = trials[best], costs[best]
+        else:
+            step = step / 2
+    return unpack([s.to_value(x) for s, x in zip(free, u)], free, base)
+
+
 def refit_parameters(data: Data, base: Model, runner=None, J: np.ndarray | None = None, iters: int = 4) -> Model:
     """Refit the rig's parameters within their tolerances (rigs.md section 4) on the training data."""
     free = rig_slots(data)

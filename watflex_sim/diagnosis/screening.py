@@ -22,6 +22,8 @@ from .data import Data, Model, STRIDE, fit_scores, scale_of
 from .fitting import Slot, jacobian, levenberg, rig_slots, unpack, value_of
 from .runner import evaluator, held, simulate_all
 
+STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
+# the other side of neutral (0.9 -> 2.0): a stiffer link than the datasheet's is as likely as a softer one
 SWITCH_LEVELS = (1.0, 0.1, 0.01)  # x start of a switch candidate's log-scaled size (width, stiffness, ...)
 LARGE_PROBE = 4.0  # x (start - neutral): friction-like levels and `wide` parameters are probed
 # small and large, since a small dry friction can move a closed loop the other way from a large
@@ -39,7 +41,8 @@ class Candidate:
     """A catalogue effect at one place: its parameters (physical units) with slots, and its
     signature: the change of the training residual per unit of each parameter that has a
     neutral value, or (a 'switch') the change the whole effect at its start values makes.
-    Effort-scaled and `wide` parameters are probed at two levels (start and LARGE_PROBE x start)."""
+    Effort-scaled and `wide` parameters are probed at two levels (start and LARGE_PROBE x start), a
+    `wide` log-scaled ratio at a third on the other side of neutral (STIFFER_PROBE)."""
 
     effect: str
     where: str
@@ -83,6 +86,8 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
         if p.neutral is not None:
             neutral[p.name] = p.neutral * size
     levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" or p.wide for p in params) else (1.0,)
+    if any(p.wide and p.log and p.neutral is not None for p in params):
+        levels += (STIFFER_PROBE,)
     quanta = {p.name: p.quantum for p in params if p.quantum > 0}
     return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta)
 
@@ -215,8 +220,8 @@ def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at
             for n, a in zip(names, x[len(free):]):
                 if n != "switch":
                     slot = cand.slots[n]
-                    if slot.log:  # a ratio acts nonlinearly: its signature is linear near its probes only
-                        reach = EXTRAPOLATE * max(abs(cand.probe(n, lv) - cand.neutral[n]) for lv in cand.levels)
+                    if slot.log:  # a ratio acts nonlinearly: its signature is linear near its probe only
+                        reach = EXTRAPOLATE * abs(cand.probe(n, level) - cand.neutral[n])
                         a = float(np.clip(a, -reach, reach))
                     value = float(np.clip(cand.neutral[n] + a, slot.low, slot.high))
                     cand.estimate[n] = value if value > 0 or not slot.log else cand.start[n]
