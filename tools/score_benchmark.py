@@ -12,7 +12,9 @@ in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-o
   "nothing missing" specificity (clean cases, with or without an uninformative last file),
   `unexplained` recall (physics outside the catalogue), median parameter error, 95 % interval
   coverage (share of true parameter values inside the finding's interval), the verdicts, how often
-  an experiment was proposed, median validation NRMSE ratio after/before, time per case.
+  an experiment was proposed and, where one was, whether running it on the case's truth and
+  diagnosing again named the true effect with no alternative left, median validation NRMSE ratio
+  after/before, time per case.
 
 Parameter error of a finding that names the right effect: for each true parameter,
 |found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
@@ -33,6 +35,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from watflex_sim import SimulationError  # noqa: E402
 from watflex_sim.diagnosis import diagnose  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
 from watflex_sim.model import ConfigError  # noqa: E402
@@ -81,6 +84,9 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
             row["error"] = parameter_error(truth_effect, case["parameters"], match["parameters"])
             row["covered"] = [lo <= case["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
                               if k in case["parameters"]]
+    proposal = report.get("proposed_experiment") or {}
+    if proposal.get("scenario_dict") and kind == "effect":
+        row["resolved"] = resolves(case, recordings, names, proposal["scenario_dict"], truth_effect, workers)
     if baselines:
         from baselines import refit_only, sindy_residual
 
@@ -93,6 +99,23 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
         except ImportError as exc:
             row["sindy"], row["sindy_held_after"] = f"unavailable ({exc})", float("nan")
     return row
+
+
+def resolves(case: dict, recordings: list, names: list[str], scenario: dict, truth_effect: str, workers: int) -> bool:
+    """Run the proposed experiment on the "rig" (the case's truth: its effect, parameter errors and
+    dropped channels, as make_benchmark made the recordings), diagnose again with it added, and say
+    whether the ambiguity is gone: the true effect named first and no alternative left to it."""
+    from make_benchmark import simulate_case
+
+    drop = ("elbow_angle",) if case.get("concealment") == "indirect channel" else ()
+    effects = [dict(effect=case["effect"], where=case["where"], **case["parameters"])]
+    try:
+        (_, extra), = simulate_case([("discriminate", scenario)], effects, case["refit_parameters"], drop)
+    except SimulationError:
+        return False
+    again = diagnose(recordings + [extra], names + ["discriminate.csv"], workers=workers, propose=False)
+    first = again["findings"][0]["effect"] if again["findings"] else NONE
+    return first == truth_effect and not again["alternatives"]
 
 
 def _pct(hits: int, total: int) -> str:
@@ -136,6 +159,8 @@ def summary(rows: list[dict], baselines: bool) -> str:
         ("95 % intervals covering the true value (target >= 80 %)", _pct(sum(covered), len(covered))),
         ("verdicts by kind of case", ", ".join(f"{k} {v}" for k, v in sorted(verdicts.items()))),
         ("experiment proposed (alternatives within noise)", _pct(sum(r.get("proposed", False) for r in rows), len(rows))),
+        ("proposed experiment run on the truth resolved the ambiguity (true effect first, no alternative left)",
+         _pct(sum(r["resolved"] for r in rows if "resolved" in r), sum("resolved" in r for r in rows))),
         ("median parameter error, right effect (target <= 15 %)", f"{100 * statistics.median(errors):.1f} % (n={len(errors)})" if errors else "-"),
         ("median held-out NRMSE after / before", f"{statistics.median(ratios):.3f}" if ratios else "-"),
         ("time per case: median / max (s)", f"{statistics.median(times):.0f} / {max(times):.0f}" if times else "-"),
