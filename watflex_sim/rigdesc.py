@@ -1,7 +1,8 @@
 """Rig descriptions: a rig as data, for simulation and diagnosis.
 
 A rig is a TOML file: `rig.toml` in a folder the user owns (or any NAME.toml) naming the model
-(`model`: an MJCF file relative to the rig file, or the name of a bundled model, models/NAME.xml),
+(`model`: an MJCF file relative to the rig file, the name of a bundled model, models/NAME.xml, or
+"datasheet": generated from its [datasheet] table by datasheet.py),
 the sensor implementation, the channels (unit, kind, noise), the default controller, the
 parameters that may be refit within a tolerance (knobs of effects.py) and where each catalogue
 effect may attach. A rig whose sensors are in the library (`generic`: encoders, commands,
