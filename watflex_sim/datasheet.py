@@ -138,6 +138,8 @@ def check(raw, source: str) -> dict:
         stage.setdefault("joint", f"drive{n}")
         stage["drive"] = _choice(stage["drive"], DRIVE_KEYS, f"{at}.drive")
         stage["drive"].setdefault("actuator", f"motor{n}")
+        if stage["drive"].get("bits", 1) != int(stage["drive"].get("bits", 1)):
+            raise ConfigError(f"{at}.drive.bits: must be a whole number, got {stage['drive']['bits']!r}")
         link = stage["link"] = _choice(stage["link"], LINK_KEYS, f"{at}.link")
         if link["type"] == "flexible":
             link["EI"] = _bending_stiffness(link, f"{at}.link")
