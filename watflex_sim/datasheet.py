@@ -329,13 +329,11 @@ def _torsional(hub, stages: list[dict], n: int):
     link = stages[n]["link"]
     body = hub.add_body(name=f"{link['name']}_seg01")  # "_seg": a one-segment chain, so chain effects apply
     _hinge(body, f"{link['name']}_j01", link.get("damping", 0.0), stiffness=link["stiffness"])
+    own = own_inertia(stages, n)  # about the hinge: added at the tip body's centre, the parallel axes add m d^2 to both
     if link.get("tip_mass", 0.0) > 0:
-        own = own_inertia(stages, n)
-        if own > 0 and "total_inertia" not in link:
-            raise ConfigError(f"datasheet.stages[{n + 1}].link: give the load as inertia or as a tip mass, not both")
-        _inertial(body, link["tip_mass"], link.get("tip_distance", link["length"]), max(tip_inertia(link), TINY))
+        _inertial(body, link["tip_mass"], link.get("tip_distance", link["length"]), max(tip_inertia(link) + own, TINY))
     else:
-        _inertial(body, TINY, 0.0, max(own_inertia(stages, n), TINY))
+        _inertial(body, TINY, 0.0, max(own, TINY))
     _bar(body, link["name"], link["length"], link.get("width", 0.03) / 3)
     return body, link["length"]
 
