@@ -317,11 +317,12 @@ def _flexible(hub, stages: list[dict], n: int):
     b, n_seg = beam(link, outboard_mass(stages, n)), n_segments(stages, n)
     last = add_flexible_chain(hub, link["name"], b, n_seg, link.get("root_clamp", 0.0))
     x_end = chain_tip_x(b, n_seg)
+    x_tip = x_end + link.get("tip_clamp", 0.0)  # the load sits at the end of the rigid tip clamp
     if link.get("tip_mass", 0.0) > 0:
-        tip = last.add_body(name=f"{link['name']}_tip", pos=[x_end, 0, 0])
+        tip = last.add_body(name=f"{link['name']}_tip", pos=[x_tip, 0, 0])
         _inertial(tip, link["tip_mass"], 0.0, max(tip_inertia(link), TINY * link["tip_mass"]))
     last.add_site(name=f"{link['name']}_end", pos=[x_end, 0, 0], size=[0.005, 0, 0])
-    return last, x_end + link.get("tip_clamp", 0.0)
+    return last, x_tip
 
 
 def _torsional(hub, stages: list[dict], n: int):
@@ -357,7 +358,7 @@ def build(d: dict, name: str = "datasheet_rig") -> mujoco.MjSpec:
             _inertial(hub, stage["mass"] if stage.get("mass", 0.0) > 0 else TINY, 0.0, TINY)
             parent, x = _torsional(hub, stages, n)
     last = stages[-1]["link"]
-    x_tip = x - last.get("tip_clamp", 0.0) if last["type"] == "flexible" else last.get("tip_distance", last["length"])
+    x_tip = x if last["type"] == "flexible" else last.get("tip_distance", last["length"])
     parent.add_site(name="tip", pos=[x_tip, 0, 0], size=[0.01, 0, 0])
     for stage in stages:
         _actuator(spec, stage)
