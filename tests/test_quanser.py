@@ -5,7 +5,6 @@ basta/quanser-2-dof-serial-flexible-link @ 48ab0ce, MIT; see LICENSE and SOURCE.
 Reference figures: ABOUT.md of ../shared/realdata/quanser_2dsfl (the published gains reproduce
 the fsf current command within 2-3 %; hub 2 stops 0.8-1.2 deg short of its +-10 deg target).
 """
-import importlib.util
 import json
 import math
 import shutil
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_continuous_are
 
+from watflex_sim import datasheet
 from watflex_sim.controllers.state_feedback import StateFeedback
 from watflex_sim.cli import EXIT_BAD_INPUT, main
 from watflex_sim.recording import RecordingError, read_recording
@@ -28,31 +28,34 @@ RIG = tomllib.loads((ROOT / "rigs" / "quanser_2dsfl.toml").read_text())
 DEG = math.pi / 180
 
 
-def _builder():
-    spec = importlib.util.spec_from_file_location("build_quanser", ROOT / "tools" / "build_quanser.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+STAGES = load_rig("quanser_2dsfl").datasheet["stages"]
 
 
 def recording(run: str):
     return read_recording(DATA / f"data_{run}_th11.mat")
 
 
-def test_committed_model_is_the_generators():
-    build = _builder()
-    assert (ROOT / "models" / "quanser_2dsfl.xml").read_text() == build.model_xml(ROOT / "rigs" / "quanser_2dsfl.toml")
+def test_the_model_generated_from_the_datasheet_has_quansers_numbers():
+    """config_2dslf.m: Ks1_th = 40.0, Ks2_th = 6.9 N m/rad (E w t^3 / 4 L); J11 = Kg1^2 Jm1 + J1fix = 0.0635,
+    J21 = 0.00302 kg m^2; Ktg = 0.75 Kt Kg = 8.925 / 0.870 N m/A, the command channels' gains."""
+    model = load_rig("quanser_2dsfl").spec().compile()
+    assert model.joint("link1_j01").stiffness[0] == pytest.approx(40.0, rel=2e-3)
+    assert model.joint("link2_j01").stiffness[0] == pytest.approx(6.86, rel=2e-3)
+    assert model.joint("drive1").armature[0] == pytest.approx(0.0635, rel=2e-3)
+    assert model.joint("drive2").armature[0] == pytest.approx(0.00302, rel=2e-3)
+    assert [datasheet.torque_per_amp(s) for s in STAGES] == pytest.approx([8.925, 0.870], rel=1e-9)
 
 
 def test_datasheet_reproduces_the_published_lqr_gains():
     """setup_2dsfl.m: lqr(A, B, diag(2500, 1, 1, 100 | 50), 10) on the manual's stage models gives
     K1 = [15.81, -42.93, 2.18, -0.71], K2 = [15.81, -40.33, 0.42, -0.71] (the rig's [controller]):
     the datasheet's inertias (Kg^2 Jm + Jfix, not the stale comments 0.0109 / 0.0090) are Quanser's."""
-    build, d = _builder(), RIG["datasheet"]
-    j22 = d["tip_mass"] * (d["tip_size"][0] ** 2 + d["tip_size"][1] ** 2) / 12 + d["tip_mass"] * d["tip_distance"] ** 2
-    stages = ((1, d["link1_inertia"], d["link1_damping"], 100.0), (2, j22, d["link2_damping"], 50.0))
+    link2 = STAGES[1]["link"]
+    j22 = datasheet.tip_inertia(link2) + link2["tip_mass"] * link2["tip_distance"] ** 2
+    stages = ((1, STAGES[0]["link"]["total_inertia"], STAGES[0]["link"]["damping"], 100.0), (2, j22, link2["damping"], 50.0))
     for (n, j_link, b_link, q_rate), row in zip(stages, RIG["controller"]["gains"]):
-        j_hub, ks, b_hub, ktg = build.drive_inertia(d, n), build.torsional_stiffness(d, n), d[f"drive{n}_damping"], build.torque_per_amp(d, n)
+        stage = STAGES[n - 1]
+        j_hub, ks, b_hub, ktg = datasheet.armature(stage), stage["link"]["stiffness"], stage["damping"], datasheet.torque_per_amp(stage)
         s = (j_hub + j_link) / (j_hub * j_link)
         A = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [0, ks / j_hub, -b_hub / j_hub, b_link / j_hub],
                       [0, -s * ks, b_hub / j_hub, -b_link * s]])
@@ -163,7 +166,7 @@ def test_diagnosis_finds_the_soft_link_but_not_the_friction_at_drive_2():
         recs.append(Recording(rec.time[keep], {c: v[keep] for c, v in rec.channels.items()}, rec.meta))
     report = diagnose(recs, ["fsf", "psf"], workers=2, max_effects=2)
     assert [(f["effect"], f["where"]) for f in report["findings"]] == [("link_stiffness_change", "link2")]
-    ks2 = _builder().torsional_stiffness(RIG["datasheet"], 2) * report["findings"][0]["parameters"]["ratio"] \
+    ks2 = STAGES[1]["link"]["stiffness"] * report["findings"][0]["parameters"]["ratio"] \
         * report["refit_parameters"]["link2_stiffness"]  # a ratio to nominal
     assert ks2 == pytest.approx(2.5, rel=0.2)
     assert report["held_out"]["after"]["nrmse"] < 0.95 * report["held_out"]["before"]["nrmse"]

@@ -1,7 +1,8 @@
 """Rig descriptions: a rig as data, for simulation and diagnosis.
 
 A rig is a TOML file: `rig.toml` in a folder the user owns (or any NAME.toml) naming the model
-(`model`: an MJCF file relative to the rig file, or the name of a bundled model, models/NAME.xml),
+(`model`: an MJCF file relative to the rig file, the name of a bundled model, models/NAME.xml, or
+"datasheet": generated from its [datasheet] table by datasheet.py),
 the sensor implementation, the channels (unit, kind, noise), the default controller, the
 parameters that may be refit within a tolerance (knobs of effects.py) and where each catalogue
 effect may attach. A rig whose sensors are in the library (`generic`: encoders, commands,
@@ -40,7 +41,7 @@ CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
-        "datasheet")  # datasheet: free numbers a model generator reads (tools/build_quanser.py)
+        "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
 # velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
 QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
@@ -49,6 +50,7 @@ CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", 
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
                 "current_per_unit"}  # A per command unit: a command limit also reported as a current
 MAT_KEYS = {"file", "variable", "column", "scale"}
+DATASHEET = "datasheet"  # model = "datasheet": the model is generated from the rig file's [datasheet]
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,7 @@ class RigDescription:
     sidecar: dict | None = None  # default sidecar for files that come without one (--rig)
     description: str = ""
     source: str = ""  # the rig file
+    datasheet: dict | None = None  # the checked [datasheet] table (datasheet.check), if any
 
     def units(self) -> dict[str, str]:
         return {c: spec["unit"] for c, spec in self.channels.items()}
@@ -81,13 +84,21 @@ class RigDescription:
 
     @property
     def model_path(self) -> Path:
-        """The model's MJCF file: `model` relative to the rig file, or models/<model>.xml for a bare name."""
+        """The model's MJCF file: `model` relative to the rig file, or models/<model>.xml for a bare name
+        (for model = "datasheet": where `watflex-sim build-model` writes it, NAME.xml beside the rig file)."""
+        if self.model == DATASHEET:
+            return Path(self.source).parent / f"{self.name}.xml"
         if self.model.endswith(".xml") or "/" in self.model or os.sep in self.model:
             return Path(self.source).parent / self.model
         return ROOT / "models" / f"{self.model}.xml"
 
     def spec(self) -> mujoco.MjSpec:
-        """The nominal model: the MJCF file, or the generator's (build.py) for a bundled model not on disk."""
+        """The nominal model: generated from [datasheet] (model = "datasheet"), the MJCF file, or the
+        generator's (build.py) for a bundled model not on disk."""
+        if self.model == DATASHEET:
+            from .datasheet import model_xml
+
+            return mujoco.MjSpec.from_string(model_xml(self.datasheet, self.name))
         path = self.model_path
         if path.is_file():
             try:
@@ -111,9 +122,16 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
 
     if set(raw) - set(KEYS):
         fail(f"unknown key(s) {', '.join(sorted(set(raw) - set(KEYS)))} (known: {', '.join(KEYS)})")
+    if "datasheet" in raw:
+        from .datasheet import check
+
+        datasheet = check(raw["datasheet"], source)
+        raw = {"model": DATASHEET, **raw}
     for key in ("model", "sensors", "channels"):
         if key not in raw:
             fail(f"missing {key!r}")
+    if raw["model"] == DATASHEET and "datasheet" not in raw:
+        fail('model = "datasheet" needs a [datasheet] table')
     if not isinstance(raw.get("name", default_name), str) or not isinstance(raw["model"], str):
         fail("name and model must be strings")
     if raw["sensors"] not in SENSORS:
@@ -162,10 +180,30 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
         description=raw.get("description", ""), source=source, mat_channels=raw.get("mat_channels"),
         mat_time=raw.get("mat_time"), control_period_s=float(period),
+        datasheet=datasheet if "datasheet" in raw else None,
     )
+    if description.model == DATASHEET:
+        _command_defaults(description, fail)
     if description.sensors == "generic":
         _check_model(description, fail)
     return description
+
+
+def _command_defaults(description: RigDescription, fail) -> None:
+    """A command channel driving a datasheet drive takes its gain (N m/A or 1), limit and bits from
+    the drive where it gives none; a gain it gives must be the datasheet's within 0.1 %."""
+    from .datasheet import command_defaults
+
+    drives = command_defaults(description.datasheet)
+    for channel, spec in description.channels.items():
+        if spec["kind"] != "command" or spec.get("actuator") not in drives:
+            continue
+        drive = drives[spec["actuator"]]
+        if "gain" in spec and abs(spec["gain"] / drive["gain"] - 1) > 1e-3:
+            fail(f"channel {channel!r}: gain {spec['gain']} is not the datasheet drive's {drive['gain']:.6g} "
+                 "(N m/A: efficiency x torque_constant x gear; 1 for a voltage drive)")
+        for key, value in drive.items():
+            spec.setdefault(key, value)
 
 
 def _check_model(description: RigDescription, fail) -> None:
