@@ -36,6 +36,8 @@ ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 
 SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
 AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
 POLISH_ITERATIONS = 6
+PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
+# scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
 NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
 REFIT_ITERATIONS = 8
 COMPASS_SWEEPS = 6  # pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations per parameter each)
@@ -183,7 +185,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             alternative = offset_alternative(data, runner, current, best) if room else None
             if alternative is not None:
                 alternative = _gains(alternative, train["noise_ratio"], held["noise_ratio"])
-                if alternative["score"] >= best["score"] - 1e-3 and _earns_place(alternative, later):
+                if alternative["score"] > best["score"] + PAIR_MARGIN and _earns_place(alternative, later):
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
                     best, alternative = alternative, best
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
