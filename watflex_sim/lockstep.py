@@ -109,12 +109,14 @@ class _Lockstep:
                 tapes[i].frame(k)
                 tapes[i].write(k, *loops[i].control(k))
             ids = np.array(live) if len(live) < len(loops) else None
+            # positions after the tick (engine: mj_kinematics) only where the next tick reads them
+            positions = any(_reads_positions(loops[i], tapes[i], k + 1) for i in live)
             for j in range(n_sub):
                 self._forces()
                 last = j == n_sub - 1 or self.friction is None
                 try:
                     batch.step(ids, nstep=1 if self.friction is not None else n_sub,
-                               stage=mujoco.mjtStage.mjSTAGE_POS if last else mujoco.mjtStage.mjSTAGE_NONE)
+                               stage=mujoco.mjtStage.mjSTAGE_POS if last and positions else mujoco.mjtStage.mjSTAGE_NONE)
                 except mjbatch.SimulationError as exc:
                     for i in exc.ids:
                         failed[int(i)] = SimulationError(f"simulation failed (at t = {k * loops[i].period:.3f} s): "
@@ -157,6 +159,12 @@ class _Lockstep:
                 cause = "a MuJoCo warning" if warned[i] else f"velocity not finite or above {MAX_QVEL:g}"
                 failed[i] = SimulationError(f"simulation diverged (detected at t = {t:.3f} s): {cause}; "
                                             "try a smaller timestep or lower gains; nothing was written")
+
+
+def _reads_positions(loop: ControlLoop, tape: Tape, k: int) -> bool:
+    """Whether tick k's sensors or arm drawing read body or site positions (the rig's positions_every)."""
+    every = loop.rig.positions_every
+    return (every and k % every == 0) or k % tape.frame_every == 0
 
 
 def _model_field(model: mujoco.MjModel, field: str):
