@@ -192,8 +192,8 @@ class BatchFriction:
     def __init__(self, members: list[FrictionCallback], frictionloss: np.ndarray, nv: int):
         rows = [(i, dof, qadr, law, state) for i, m in enumerate(members) for dof, qadr, law, state in m.joints]
         self.frictionloss, self.torque = frictionloss, np.zeros((len(members), nv))
-        self.dt = members[0].dt if members else 0.0
         self.sim = np.array([r[0] for r in rows], dtype=int)
+        self.dt = np.array([members[i].dt for i in self.sim], dtype=float)  # s, each simulation's physics step
         self.dof = np.array([r[1] for r in rows], dtype=int)
         self.qadr = np.array([r[2] for r in rows], dtype=int)
         laws = [r[3] for r in rows]
@@ -229,7 +229,7 @@ class BatchFriction:
         self.pending = np.where(self.exp, level, self.pending)
         tau = np.where(self.exp, -p["alpha2"] * v, 0.0)
         for k, law, state in self.lugre:
-            state["F"], state["z"] = lugre_step(float(v[k]), state["z"], self.dt, law.sigma0, law.sigma1, law.positive, law.negative)
+            state["F"], state["z"] = lugre_step(float(v[k]), state["z"], float(self.dt[k]), law.sigma0, law.sigma1, law.positive, law.negative)
             tau[k] = -state["F"]
         if self.positional:
             q = qpos[sim, self.qadr]
