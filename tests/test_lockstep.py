@@ -31,6 +31,8 @@ def _max_differences(single, batched) -> dict[str, float]:
 
 
 def _compare(scenarios):
+    """Every scenario's batch recording against its single run; a structure with one member would
+    run on the single-run driver, so the cases below come at least in pairs."""
     results = simulate_batch(scenarios, nthread=2)
     for scenario, result in zip(scenarios, results):
         single = simulate(scenario).recording
@@ -54,7 +56,7 @@ def test_laser_arm_seeds_and_coulomb_friction_match_single_runs():
 
 def test_watflex_elbow_step_with_payload_and_locked_shoulder_match_single_runs():
     """Nominal Watflex joint friction (levels set between steps), a payload (per-simulation masses)
-    and a locked shoulder (another model structure, so another batch)."""
+    and a locked shoulder (another model structure; alone in it, it runs on the single-run driver)."""
     base = ["duration_s=0.6"]
     scenarios = [load_scenario("watflex_elbow_step", base),
                  load_scenario("watflex_elbow_step", base + ["payload_kg=0.2", "seed=3"]),
@@ -67,8 +69,8 @@ def test_watflex_friction_variants_match_single_runs():
     (effects), and LuGre presliding (watflex_presliding)."""
     ripple = ("effects=[{effect='position_dependent_friction', where='elbow', amplitude=0.05, period=0.5, spring=0.1},"
               " {effect='dwell_time_stiction', where='elbow', gain=0.5, time_constant=0.2}]")
-    _compare([load_scenario("watflex_elbow_step", ["duration_s=0.6", ripple]),
-              load_scenario("watflex_presliding", ["duration_s=0.6"])])
+    _compare([load_scenario(name, ["duration_s=0.6", f"seed={seed}", *sets]) for seed in (1, 2)
+              for name, sets in (("watflex_elbow_step", [ripple]), ("watflex_presliding", []))])
 
 
 def test_a_diverging_member_is_dropped_and_the_others_go_on():

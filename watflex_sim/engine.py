@@ -351,7 +351,12 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     Raises ConfigError for an impossible configuration and SimulationError on divergence.
     `progress(fraction)` is called about every simulated 0.1 s.
     """
-    loop = ControlLoop(scenario, parameter_names)
+    return run(ControlLoop(scenario, parameter_names), progress)
+
+
+def run(loop: ControlLoop, progress: Callable[[float], None] | None = None) -> SimResult:
+    """Run a set-up ControlLoop to its end (the single-run driver); as `simulate`."""
+    scenario = loop.scenario
     tape = Tape(loop)
     report_every = max(1, int(0.1 / loop.period))
     start = wallclock.perf_counter()

@@ -6,7 +6,8 @@ objects, which read and write rows of the batch's live arrays; the physics of al
 `Batch.step` per physics step, with the joint friction computed for the whole batch on arrays
 between steps (joint_friction.BatchFriction) instead of a per-simulation passive callback.
 Scenarios whose models differ in structure (segments, locked joints, added bodies or joints) run
-in separate batches; within one, the model fields that differ are per-simulation (`expand`).
+in separate batches; within one, the model fields that differ are per-simulation (`expand`). A
+scenario alone in its structure runs on the single-run driver (engine.run), which costs less there.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from .engine import CHECK_EVERY, MAX_QVEL, ControlLoop, SimResult, SimulationError, Tape
+from .engine import CHECK_EVERY, MAX_QVEL, ControlLoop, SimResult, SimulationError, Tape, run
 from .joint_friction import BatchFriction
 
 log = logging.getLogger(__name__)
@@ -55,9 +56,19 @@ def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
         groups.setdefault((structure(loop.model), loop.n_sub), []).append(i)
     out: list = [None] * len(loops)
     for members in groups.values():
+        if len(members) == 1:  # alone, the single-run driver is cheaper (same recording)
+            out[members[0]] = _alone(loops[members[0]])
+            continue
         for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
             out[i] = result
     return out
+
+
+def _alone(loop: ControlLoop) -> SimResult | SimulationError:
+    try:
+        return run(loop)
+    except SimulationError as exc:
+        return exc
 
 
 class _Lockstep:
