@@ -11,6 +11,9 @@ Usage: python tools/bench.py [--quick] [--profile SCENARIO] [...]
 2. Segment sweep: each rig rebuilt by `BUILDERS` with `n_segments` = N (nominal model, no
    locks, no payload), bare mj_step per step and real-time factor at the rig's timestep.
 3. Optional (--profile): a cProfile breakdown of the control loop in us per control tick.
+5. Lockstep (watflex_sim.lockstep): per-simulation cost in batches of 1, 8, 32, 128 against bare
+   mj_step on laser_arm_step and watflex_elbow_step, 1 vs 2 threads, where the time goes, and a
+   sweep's runs per second against its bare-physics limit.
 
 Every timing is run --repeats times (default 3) and the best is reported. The default run
 takes well under 2 minutes on 2 cores; --quick caps scenarios at 1 s simulated and the sweep
@@ -570,6 +573,85 @@ def bench_batch(args) -> str:
     ])
 
 
+LOCKSTEP_SIZES = (1, 8, 32, 128)
+LOCKSTEP_TARGET = 1.15  # per-simulation cost in a batch of >= 32 / bare mj_step (issue 16)
+
+
+def bench_lockstep(args) -> str:
+    """Section 5, lockstep (watflex_sim.lockstep.simulate_batch): per-simulation cost per physics step
+    in batches of B against bare mj_step, thread scaling, where a batch's time goes, and a sweep's
+    runs per second against the bare-physics limit measured in the same run."""
+    from watflex_sim.lockstep import simulate_batch
+
+    duration = 0.5 if args.quick else 1.0
+    sizes = LOCKSTEP_SIZES[:3] if args.quick else LOCKSTEP_SIZES
+    rows, lines = [], []
+    for name in ("laser_arm_step", "watflex_elbow_step"):
+        scenario = load_scenario(name, [f"duration_s={duration}"])
+        model, start, n_sub = initial_state(scenario)
+        steps = round(duration / CONTROL_PERIOD) * n_sub
+        bare = min(time_bare(model, start, steps, args.chunk)[0] for _ in range(args.repeats)) / steps
+        batch = [load_scenario(name, [f"duration_s={duration}", f"seed={i}"]) for i in range(max(sizes))]
+        cells = [name, f"{bare * 1e6:.2f}"]
+        for b in sizes:
+            per = min(simulate_batch(batch[:b], nthread=2)[0].wall_time_s for _ in range(args.repeats)) / steps
+            cells.append(f"{per * 1e6:.2f} ({per / bare:.2f})")
+        one = min(simulate_batch(batch[:32], nthread=1)[0].wall_time_s for _ in range(args.repeats)) / steps
+        cells.append(f"{one * 1e6:.2f} ({one / bare:.2f})")
+        rows.append(cells)
+        profiler = cProfile.Profile()
+        profiler.enable()
+        simulate_batch(batch[:32], nthread=2)
+        profiler.disable()
+        stats = pstats.Stats(profiler).stats
+        total = sum(v[2] for v in stats.values())  # tottime of everything
+        share = {}
+        for (file, _line, func), v in stats.items():
+            key = ("physics (Batch.step)" if func.endswith("_batch.step}") or func == "<built-in method mujoco._batch.step>"
+                   else "friction on arrays" if "joint_friction" in file and func == "step"
+                   else "set-up (models, ControlLoop)" if func in ("__init__",) and "lockstep" in file else None)
+            if key:
+                share[key] = share.get(key, 0.0) + (v[3] if "set-up" in key else v[2])
+        control = sum(v[3] for (f, _l, fn), v in stats.items() if fn == "control" and f.endswith("engine.py"))
+        record = sum(v[3] for (f, _l, fn), v in stats.items() if fn in ("write", "frame") and f.endswith("engine.py"))
+        share |= {"control half (sensors, controller, converters)": control, "recording (Tape)": record}
+        lines.append(f"- {name}, B = 32, 2 threads, under cProfile (Python inflated): " + ", ".join(
+            f"{k} {v / total * 100:.0f} %" for k, v in share.items()))
+
+    # a sweep: 40 laser-arm runs (payload x gain, noise off, as section 4), against its bare physics
+    n = 12 if args.quick else 40
+    sweep = [load_scenario("laser_arm_step", ["noise=false", f"duration_s={duration}", f"payload_kg={0.4 * (i % 5)}",
+                                              f"controller.kp={0.1 + 0.02 * (i // 5) % 4}"]) for i in range(n)]
+    bare_total = 0.0
+    for s in sweep:
+        model, start, n_sub = initial_state(s)
+        steps = round(duration / CONTROL_PERIOD) * n_sub
+        bare_total += time_bare(model, start, steps, args.chunk)[0]
+    limit = 2 * n / bare_total  # runs/s: bare mj_step of every run, on both cores, nothing else
+    t0 = time.perf_counter()
+    for s in sweep:
+        engine.simulate(s)
+    single = n / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    simulate_batch(sweep, nthread=2)
+    lock = n / (time.perf_counter() - t0)
+    lines += [
+        f"- sweep of {n} laser_arm_step runs ({duration:g} s, noise off; set-up included): single-run loop "
+        f"{single:.1f} runs/s (1 process; x2 for 2 ideal processes: {2 * single:.1f}); lockstep, 1 process, "
+        f"2 threads: {lock:.1f} runs/s; bare-physics limit (bare mj_step of every run on 2 cores, no set-up): "
+        f"{limit:.1f} runs/s -> {lock / limit * 100:.0f} % of it (target 85 %: {'met' if lock >= 0.85 * limit else 'NOT met'})",
+    ]
+    return "\n".join([
+        f"## 5. Lockstep: per-simulation cost per physics step in batches of B ({duration:g} s runs, seeds 0..B-1)",
+        "",
+        table(["scenario", "bare mj_step (us)", *(f"B={b}, 2 thr (us, x bare)" for b in sizes), "B=32, 1 thr"], rows),
+        "",
+        *lines,
+        f"- target: B >= 32 at <= {LOCKSTEP_TARGET} x bare. Per-simulation cost = the batch's loop wall (set-up "
+        "excluded) / B / physics steps; bare = mj_step on one thread from the same state with zero control.",
+    ])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -591,6 +673,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-sweep", action="store_true", help="skip section 2")
     parser.add_argument("--no-friction", action="store_true", help="skip section 3")
     parser.add_argument("--no-batch", action="store_true", help="skip section 4 (batch scaling)")
+    parser.add_argument("--no-lockstep", action="store_true", help="skip section 5 (lockstep batches)")
     parser.add_argument("--profile", nargs="*", metavar="SCENARIO",
                         help="add a cProfile breakdown (us per control tick) of these scenarios "
                              "(no name: laser_arm_step)")
@@ -615,6 +698,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\n" + bench_friction(args), flush=True)
     if not args.no_batch:
         print("\n" + bench_batch(args), flush=True)
+    if not args.no_lockstep:
+        print("\n" + bench_lockstep(args), flush=True)
     for name in args.profile or ():
         print("\n" + profile(name, args), flush=True)
     print(f"\nbenchmark took {time.perf_counter() - t0:.1f} s")

@@ -4,7 +4,8 @@ A sweep file (TOML; README "Sweeps", examples in `sweeps/`) names a `scenario`, 
 (grid | random | lhs) with `samples` and `seed` for the last two, a `[fixed]` table set on every
 run and a `[parameters]` table of swept dotted scenario keys ('payload_kg', 'controller.kp',
 'effects.0.torque_positive': lists by index), each a list of values, {low, high[, n][, log]} or
-{mean, std}. Each run is a row of DIR/results.parquet and .csv; finished rows are journalled to
+{mean, std}. Locally, each worker process steps a chunk of runs together (lockstep.simulate_batch).
+Each run is a row of DIR/results.parquet and .csv; finished rows are journalled to
 DIR/runs.jsonl as they come, so an interrupted or killed sweep resumes where it stopped.
 """
 from __future__ import annotations
@@ -32,6 +33,7 @@ import mujoco
 import numpy as np
 
 from .engine import ControlLoop, SimulationError, simulate
+from .lockstep import simulate_batch
 from .metrics import step_metrics
 from .model import ConfigError, load_model, read_toml, rig_params
 from .recording import write_recording
@@ -46,6 +48,7 @@ OPEN_TABLES = ("parameters", "joint_friction")  # tables whose keys a sweep may 
 METRICS = ("rise_time_s", "settling_time_s", "overshoot_pct", "steady_state_error", "tracking_rms",
            "peak_strain_V", "tip_error_rms_m", "tip_error_final_m")
 CHECKPOINT_S = 30.0  # s between rewrites of the results files during a sweep (at least 10x a rewrite's time)
+LOCKSTEP = 32  # runs a worker steps together (lockstep.simulate_batch); at most this many are lost to a crash
 
 
 @dataclass
@@ -309,6 +312,52 @@ def run_one(task: dict) -> dict:
     return row | {"wall_time_s": time.perf_counter() - start, "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
+def run_many(tasks: list[dict], nthread: int = 1) -> list[dict]:
+    """run_one for each task, the simulations of each rig stepped together in lockstep
+    (lockstep.simulate_batch, on nthread threads); a group whose set-up fails (a bad scenario)
+    falls back to run_one per task, so each row carries its own error."""
+    rows: list = [None] * len(tasks)
+    by_rig: dict[str, list[int]] = {}
+    for k, task in enumerate(tasks):
+        by_rig.setdefault(task["scenario"].get("rig", ""), []).append(k)
+    for rig, ks in by_rig.items():
+        start = time.perf_counter()
+        try:
+            results = simulate_batch([check(tasks[k]["scenario"]) for k in ks], _knobs(rig), nthread)
+        except Exception:  # noqa: BLE001 - found again, per run, by run_one
+            for k in ks:
+                rows[k] = run_one(tasks[k])
+            continue
+        setup = (time.perf_counter() - start - sum(getattr(r, "wall_time_s", 0.0) for r in results)) / len(ks)
+        for k, result in zip(ks, results):
+            t0, task, row = time.perf_counter(), tasks[k], _row(tasks[k], "ok")
+            if isinstance(result, SimulationError):
+                row |= {"status": "diverged", "error": str(result).replace("; nothing was written", "")}
+            else:
+                try:
+                    row |= run_metrics(result.recording, task["scenario"])
+                    if task.get("keep"):
+                        write_recording(result.recording, task["keep"], task["run_id"])
+                except Exception as exc:  # noqa: BLE001
+                    row |= {"status": "error", "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
+            run = getattr(result, "wall_time_s", 0.0)  # its share of the lockstep loop
+            rows[k] = row | {"wall_time_s": setup + run + time.perf_counter() - t0,
+                             "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    return rows
+
+
+def chunks(tasks: Iterator[dict], size: int) -> Iterator[list[dict]]:
+    """Tasks in lists of `size` (the last one shorter): the unit a worker steps in lockstep."""
+    chunk: list[dict] = []
+    for task in tasks:
+        chunk.append(task)
+        if len(chunk) == size:
+            yield chunk
+            chunk = []
+    if chunk:
+        yield chunk
+
+
 # ----------------------------------------------------------------------------- executors
 
 
@@ -320,16 +369,17 @@ def cores() -> int:
 def _worker(conn) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's; it stops the workers
     try:
-        while (task := conn.recv()) is not None:
-            conn.send(run_one(task))
+        while (chunk := conn.recv()) is not None:
+            conn.send(run_many(chunk))
     except (EOFError, BrokenPipeError, KeyboardInterrupt):
         pass  # the parent is gone
 
 
-def run_pool(tasks: Iterator[dict], workers: int, on_row: Callable[[dict], None]) -> None:
-    """Run tasks on `workers` processes, one simulation at a time each (MuJoCo's callbacks are
-    global to a process). A run whose process dies is retried once in a fresh one, then recorded
-    as 'crashed'. The workers are killed when this returns or raises (Ctrl-C)."""
+def run_pool(tasks: Iterator[list[dict]], workers: int, on_row: Callable[[dict], None]) -> None:
+    """Run chunks of tasks (`chunks`) on `workers` processes, each chunk in lockstep on one thread
+    (run_many: processes still pay, since the control half of every simulation is Python). A chunk
+    whose process dies is retried once in a fresh one, then its runs are recorded as 'crashed'.
+    The workers are killed when this returns or raises (Ctrl-C)."""
     forkserver = "forkserver" in mp.get_all_start_methods()  # workers forked from a clean, preloaded process
     ctx = mp.get_context("forkserver" if forkserver else "spawn")
     if forkserver:
@@ -376,17 +426,19 @@ def run_pool(tasks: Iterator[dict], workers: int, on_row: Callable[[dict], None]
                     row = None
                 if row is not None:
                     procs[conn][1] = None
-                    on_row(row)
+                    for r in row:
+                        on_row(r)
                     continue
                 proc.join()
                 del procs[conn]
                 conn.close()
                 start()
-                task["lost"] = task.get("lost", 0) + 1
-                log.warning("worker %d died (exit code %s) running run %d; %s", proc.pid, proc.exitcode,
-                            task["index"], "recorded as crashed" if task["lost"] > 1 else "retrying it")
-                if task["lost"] > 1:
-                    on_row(_row(task, "crashed", f"worker process died twice running it (exit code {proc.exitcode})"))
+                lost = task[0]["lost"] = task[0].get("lost", 0) + 1
+                log.warning("worker %d died (exit code %s) running the chunk of runs %s; %s", proc.pid, proc.exitcode,
+                            ", ".join(str(t["index"]) for t in task), "recorded as crashed" if lost > 1 else "retrying it")
+                if lost > 1:
+                    for t in task:
+                        on_row(_row(t, "crashed", f"worker process died twice running it (exit code {proc.exitcode})"))
                 else:
                     retry.append(task)
     finally:
@@ -585,7 +637,8 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
         if to_do and ray_address:
             run_ray(tasks(), ray_address, on_row, workers)
         elif to_do:
-            run_pool(tasks(), min(workers or cores(), to_do), on_row)
+            n = min(workers or cores(), to_do)
+            run_pool(chunks(tasks(), min(LOCKSTEP, -(-to_do // (4 * n)))), n, on_row)  # >= 4 chunks a worker
         complete = True
     finally:
         journal.flush()

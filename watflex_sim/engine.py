@@ -302,6 +302,17 @@ class ControlLoop:
 
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
+        obs, recorded = self.control(k)
+        mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
+        mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
+        self.monitor.update(self.data, k)
+        if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
+            _check_state(self.model, self.data, (k + 1) * self.period)
+        return obs, recorded
+
+    def control(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
+        """The control half of period k, shared with lockstep.simulate_batch: sensors, controller,
+        converters and effects, up to the plant input in `data.ctrl`; returns (measured, recorded)."""
         t = k * self.period
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
@@ -316,11 +327,6 @@ class ControlLoop:
             u = self.data.ctrl[actuator] / scale * gain + offset
             self.data.ctrl[actuator] = scale * max(-limit, min(limit, u))
         recorded.update(self._sense(self.rig.monitor()) if self.patch.sensor else self.rig.monitor())
-        mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
-        mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
-        self.monitor.update(self.data, k)
-        if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
-            _check_state(self.model, self.data, t + self.period)
         return obs, recorded
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
@@ -345,52 +351,77 @@ def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
     Raises ConfigError for an impossible configuration and SimulationError on divergence.
     `progress(fraction)` is called about every simulated 0.1 s.
     """
-    loop = ControlLoop(scenario, parameter_names)
-    rig, n_ticks, period = loop.rig, loop.n_ticks, loop.period
-    column = {c: j for j, c in enumerate(rig.channels)}
-    table = np.full((n_ticks, len(column)), np.nan)  # preallocated: memory is what the run records
-    frame_every = max(1, int(round(1.0 / (scenario["frame_rate_hz"] * period))))
-    frame_ticks = range(0, n_ticks, frame_every)
-    frames = np.empty((len(frame_ticks), *np.shape(rig.arm_points())))
-    report_every = max(1, int(0.1 / period))
+    return run(ControlLoop(scenario, parameter_names), progress)
+
+
+def run(loop: ControlLoop, progress: Callable[[float], None] | None = None) -> SimResult:
+    """Run a set-up ControlLoop to its end (the single-run driver); as `simulate`."""
+    scenario = loop.scenario
+    tape = Tape(loop)
+    report_every = max(1, int(0.1 / loop.period))
     start = wallclock.perf_counter()
     with loop:
-        for k in range(n_ticks):
-            if k % frame_every == 0:
-                frames[k // frame_every] = rig.arm_points()
-            obs, recorded = loop.tick(k)
-            for c, v in (obs | recorded).items():
-                j = column.get(c)
-                if j is not None:
-                    table[k, j] = v
+        for k in range(loop.n_ticks):
+            tape.frame(k)
+            tape.write(k, *loop.tick(k))
             if progress and k % report_every == 0:
-                progress(k / n_ticks)
+                progress(k / loop.n_ticks)
     wall = wallclock.perf_counter() - start
     if progress:
         progress(1.0)
-    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], n_ticks * period, wall)
+    log.info("%s: %.2f s simulated in %.2f s wall", scenario["name"], loop.n_ticks * loop.period, wall)
+    return tape.result(wall)
 
-    channels = {c: np.ascontiguousarray(table[:, j]) for c, j in column.items() if not np.isnan(table[:, j]).all()}
-    del table
-    controller_meta = dict(scenario["controller"])
-    meta = {
-        "format": FORMAT,
-        "rig": scenario["rig"],
-        "experiment": scenario["experiment"],
-        "payload_kg": scenario["payload_kg"],
-        "controller": controller_meta,
-        "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
-        "control_period_s": period,
-        "locked_joints": scenario["locked_joints"],
-        "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
-        "seed": scenario["seed"],
-        # the values used: timestep and n_segments 0 stand for the model's own
-        "scenario": {k: v for k, v in scenario.items() if k != "name"}
-        | {"timestep": float(loop.model.opt.timestep), "n_segments": loop.n_segments},
-    }
-    time = np.arange(n_ticks) * period
-    frame_time = np.array(frame_ticks, dtype=float) * period
-    return SimResult(Recording(time, channels, meta), frames, frame_time, wall)
+
+class Tape:
+    """A run's recording as it is made: channel table and arm frames, preallocated (shared by
+    `simulate` and lockstep.simulate_batch)."""
+
+    def __init__(self, loop: ControlLoop):
+        self.loop, rig = loop, loop.rig
+        self.column = {c: j for j, c in enumerate(rig.channels)}
+        self.table = np.full((loop.n_ticks, len(self.column)), np.nan)  # memory is what the run records
+        self.frame_every = max(1, int(round(1.0 / (loop.scenario["frame_rate_hz"] * loop.period))))
+        self.frame_ticks = range(0, loop.n_ticks, self.frame_every)
+        self.frames = np.empty((len(self.frame_ticks), *np.shape(rig.arm_points())))
+
+    def frame(self, k: int) -> None:
+        """Draw the arm if tick k is a frame tick (before the tick runs)."""
+        if k % self.frame_every == 0:
+            self.frames[k // self.frame_every] = self.loop.rig.arm_points()
+
+    def write(self, k: int, obs: dict[str, float], recorded: dict[str, float]) -> None:
+        """Record tick k's measured and recorded channels."""
+        column, row = self.column, self.table[k]
+        for c, v in (obs | recorded).items():
+            j = column.get(c)
+            if j is not None:
+                row[j] = v
+
+    def result(self, wall: float) -> "SimResult":
+        """The finished run (wall: s it took)."""
+        loop, scenario, table, period = self.loop, self.loop.scenario, self.table, self.loop.period
+        n_ticks = loop.n_ticks
+        channels = {c: np.ascontiguousarray(table[:, j]) for c, j in self.column.items() if not np.isnan(table[:, j]).all()}
+        controller_meta = dict(scenario["controller"])
+        meta = {
+            "format": FORMAT,
+            "rig": scenario["rig"],
+            "experiment": scenario["experiment"],
+            "payload_kg": scenario["payload_kg"],
+            "controller": controller_meta,
+            "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
+            "control_period_s": period,
+            "locked_joints": scenario["locked_joints"],
+            "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
+            "seed": scenario["seed"],
+            # the values used: timestep and n_segments 0 stand for the model's own
+            "scenario": {k: v for k, v in scenario.items() if k != "name"}
+            | {"timestep": float(loop.model.opt.timestep), "n_segments": loop.n_segments},
+        }
+        time = np.arange(n_ticks) * period
+        frame_time = np.array(self.frame_ticks, dtype=float) * period
+        return SimResult(Recording(time, channels, meta), self.frames, frame_time, wall)
 
 
 def energy(model: mujoco.MjModel, data: mujoco.MjData) -> float:

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 import mujoco
+import numpy as np
 
 from .friction import lugre_step, stribeck_level
 from .model import ConfigError
@@ -176,3 +177,62 @@ class FrictionCallback:
                 torque -= law.ripple_amplitude * math.sin(2 * math.pi * q / law.ripple_period + law.ripple_phase)
                 torque -= law.spring * q
             d.qfrc_passive[dof] += torque
+
+
+class BatchFriction:
+    """The same friction for many simulations at once, on arrays (lockstep.simulate_batch).
+
+    `members[i]` is simulation i's FrictionCallback (built, never installed). `step(qpos, qvel,
+    qfrc_constraint)` is called once before each physics step with the (nsim, n) state and the
+    previous step's constraint force; it returns the (nsim, nv) torque for `qfrc_applied` and
+    writes the level into the expanded `dof_frictionloss`. As in the callback, the level computed
+    before step j acts from step j + 1 (MuJoCo builds its constraints before the passive forces).
+    """
+
+    def __init__(self, members: list[FrictionCallback], frictionloss: np.ndarray, nv: int):
+        rows = [(i, dof, qadr, law, state) for i, m in enumerate(members) for dof, qadr, law, state in m.joints]
+        self.frictionloss, self.torque = frictionloss, np.zeros((len(members), nv))
+        self.sim = np.array([r[0] for r in rows], dtype=int)
+        self.dt = np.array([members[i].dt for i in self.sim], dtype=float)  # s, each simulation's physics step
+        self.dof = np.array([r[1] for r in rows], dtype=int)
+        self.qadr = np.array([r[2] for r in rows], dtype=int)
+        laws = [r[3] for r in rows]
+        self.lugre = [(k, law, state) for k, (_i, _d, _q, law, state) in enumerate(rows) if law.law == "lugre"]
+        self.exp = np.array([law.law == "exponential" for law in laws], dtype=bool)
+        col = lambda f: np.array([f(law) for law in laws], dtype=float)  # noqa: E731
+        self.side = {s: {name: col(lambda law, s=s, name=name: getattr(getattr(law, s), name))
+                         for name in ("alpha0", "alpha1", "alpha2", "v_s")} for s in ("positive", "negative")}
+        self.dwell_gain, self.dwell_time = col(lambda law: law.dwell_gain), col(lambda law: law.dwell_time)
+        self.ripple = col(lambda law: law.ripple_amplitude)
+        self.ripple_period, self.ripple_phase = col(lambda law: law.ripple_period), col(lambda law: law.ripple_phase)
+        self.spring = col(lambda law: law.spring)
+        self.positional = bool((self.ripple != 0).any() or (self.spring != 0).any())
+        self.rest = np.zeros(len(rows))  # s at rest
+        self.pending = frictionloss[self.sim, self.dof].copy()  # N m: the level for the next step
+
+    def __len__(self) -> int:
+        return len(self.sim)
+
+    def step(self, qpos: np.ndarray, qvel: np.ndarray, qfrc_constraint: np.ndarray) -> np.ndarray:
+        """Levels and torques (N m) for the coming physics step; returns the torque array."""
+        sim, dof = self.sim, self.dof
+        v = qvel[sim, dof]
+        self.frictionloss[sim, dof] = self.pending  # the level the callback set during the last step
+        forward = np.where(v > V_REST, True, np.where(v < -V_REST, False, qfrc_constraint[sim, dof] <= 0))
+        pos, neg = self.side["positive"], self.side["negative"]
+        p = {name: np.where(forward, pos[name], neg[name]) for name in pos}
+        self.rest = np.where(np.abs(v) < V_REST, self.rest + self.dt, 0.0)
+        level = p["alpha0"] + p["alpha1"] * np.exp(-((np.abs(v) / p["v_s"]) ** 2.0))
+        dwell = self.dwell_gain != 0
+        if dwell.any():
+            level = np.where(dwell, level * (1.0 + self.dwell_gain * (1.0 - np.exp(-self.rest / self.dwell_time))), level)
+        self.pending = np.where(self.exp, level, self.pending)
+        tau = np.where(self.exp, -p["alpha2"] * v, 0.0)
+        for k, law, state in self.lugre:
+            state["F"], state["z"] = lugre_step(float(v[k]), state["z"], float(self.dt[k]), law.sigma0, law.sigma1, law.positive, law.negative)
+            tau[k] = -state["F"]
+        if self.positional:
+            q = qpos[sim, self.qadr]
+            tau = tau - self.ripple * np.sin(2 * np.pi * q / self.ripple_period + self.ripple_phase) - self.spring * q
+        self.torque[sim, dof] = tau
+        return self.torque

@@ -5,7 +5,8 @@ import copy
 
 import numpy as np
 
-from .engine import simulate
+from .engine import SimulationError, simulate
+from .lockstep import simulate_batch
 from .model import ConfigError
 from .recording import Recording
 from .rigdesc import load_rig
@@ -63,6 +64,25 @@ def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None
 
     With `until` (s from the start) the simulation stops there; later samples hold its last value.
     With `noise_seed` the rig's measurement noise is on (fed back through the controller as on the rig)."""
+    scenario = _resim_scenario(rec, effects, parameters, until, noise_seed)
+    return _sampled(rec, simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording)
+
+
+def resimulate_many(jobs: list[tuple], nthread: int = 0) -> list[Recording | SimulationError]:
+    """`resimulate(*job)` for every job (rec, effects, parameters, until, noise_seed), stepped together
+    in lockstep (lockstep.simulate_batch, nthread 0: all CPUs); a diverged job gives its SimulationError."""
+    out: list = [None] * len(jobs)
+    by_rig: dict[str, list[int]] = {}
+    for k, job in enumerate(jobs):
+        by_rig.setdefault(job[0].rig, []).append(k)
+    for rig, ks in by_rig.items():
+        scenarios = [_resim_scenario(*jobs[k]) for k in ks]
+        for k, result in zip(ks, simulate_batch(scenarios, load_rig(rig).parameter_knobs(), nthread)):
+            out[k] = result if isinstance(result, SimulationError) else _sampled(jobs[k][0], result.recording)
+    return out
+
+
+def _resim_scenario(rec: Recording, effects=(), parameters=None, until=None, noise_seed=None) -> dict:
     scenario = scenario_from_recording(rec)
     if noise_seed is not None:
         scenario.update(noise=True, seed=int(noise_seed))
@@ -70,7 +90,11 @@ def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None
         scenario["duration_s"] = min(scenario["duration_s"], until + 2 * scenario["control_period_s"])
     scenario["effects"] = list(effects)
     scenario["parameters"] = dict(parameters or {})
-    sim = simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording
+    return scenario
+
+
+def _sampled(rec: Recording, sim: Recording) -> Recording:
+    """A simulation's channels sampled at the recording's times."""
     t = rec.time - rec.time[0]
     channels = {c: np.interp(t, sim.time, v) for c, v in sim.channels.items() if c in rec.channels}
     return Recording(rec.time.copy(), channels, sim.meta)

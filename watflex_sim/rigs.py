@@ -48,6 +48,7 @@ class Rig:
     command_channels: tuple[str, ...]
     command_actuators: dict[str, int]  # command channel -> actuator id
     command_scale: dict[str, float] = {}  # command channel -> actuator input per command unit (1 if absent)
+    positions_every = 1  # observe() reads body/site positions (not just qpos) on ticks that are multiples of this; 0: never
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, params, noise: bool, seed: int):
         self.model, self.data, self.p = model, data, params
@@ -177,7 +178,7 @@ class WatflexRig(Rig):
         self._adc_step = 2 * params.strain_adc_range / 4096
         self._strain_noise = self.noise * params.noise_strain
         self._camera_noise = self.noise * params.camera_error
-        self._camera_every = int(round(1.0 / (params.camera_rate * CONTROL_PERIOD)))
+        self._camera_every = self.positions_every = int(round(1.0 / (params.camera_rate * CONTROL_PERIOD)))
         self._tick = 0
         self._draw_bodies = np.array(
             [b for b in range(1, model.nbody) if not model.body(b).name.startswith("link2_root")]
@@ -279,6 +280,7 @@ class GenericRig(Rig):
                 self._disturbances[channel] = self._dof(spec["joint"])
         self.command_actuators = {c: a for c, (a, *_rest) in self._commands.items()}
         self.command_scale = {c: g for c, (_a, g, *_rest) in self._commands.items()}
+        self.positions_every = 0  # its sensors read qpos and qvel only
         self._filtered: dict[str, tuple[list, list]] = {}  # channel -> (inputs, outputs) of its filter
 
     def _link(self, spec) -> list[tuple[int, int, float]]:

@@ -1,13 +1,17 @@
-"""Simulation jobs of one diagnosis: re-simulating the recordings with a model, in worker processes.
+"""Simulation jobs of one diagnosis: re-simulating the recordings with a model, in lockstep.
 
 Contract: every worker holds the diagnosis' `Data` (set once by `Runner`); a job is one recording
-simulated with one `Model`. MuJoCo callbacks are process-global, so each process runs one simulation
-at a time. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner`
-ends them at once when the diagnosis is interrupted or fails (interrupts.stop_pool).
+simulated with one `Model`. The jobs of one call (every recording, for one or several models) run
+together in lockstep (resim.resimulate_many, one mujoco.batch.Batch per model structure); with
+worker processes they are split into one contiguous share per worker, each stepped on one thread
+(the batch's Python control half is single-threaded, so processes still pay on 2 cores). A model
+that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
+when the diagnosis is interrupted or fails (interrupts.stop_pool).
 """
 from __future__ import annotations
 
 import logging
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
@@ -15,7 +19,7 @@ import numpy as np
 from ..engine import SimulationError
 from ..interrupts import stop_pool, worker_init
 from ..recording import Recording
-from ..resim import resimulate
+from ..resim import resimulate_many
 from .data import Data, Model, in_part, residual_vector
 
 log = logging.getLogger(__name__)
@@ -31,12 +35,22 @@ def last_time(rec: Recording, train: np.ndarray, part: str) -> float | None:
 def simulate_all(data: Data, model: Model, part: str = "all") -> list[Recording] | None:
     """The recordings re-simulated with `model` (those with samples in `part`; the others are left
     as the measurement itself, contributing nothing); None if a simulation diverged."""
-    try:
-        return [resimulate(r, model.effects, model.parameters, until=last_time(r, t, part)) if in_part(t, part).any() else r
-                for r, t in zip(data.recordings, data.train)]
-    except SimulationError as exc:
-        log.info("model %s diverged: %s", model, exc)
+    wanted = [i for i, t in enumerate(data.train) if in_part(t, part).any()]
+    sims = resimulate_many([(data.recordings[i], model.effects, model.parameters,
+                             last_time(data.recordings[i], data.train[i], part)) for i in wanted], _threads())
+    failed = next((s for s in sims if isinstance(s, SimulationError)), None)
+    if failed is not None:
+        log.info("model %s diverged: %s", model, failed)
         return None
+    out = list(data.recordings)
+    for i, sim in zip(wanted, sims):
+        out[i] = sim
+    return out
+
+
+def _threads() -> int:
+    """Batch threads here: one in a worker process (the workers share the CPUs), else all CPUs (0)."""
+    return 1 if multiprocessing.parent_process() is not None else 0
 
 
 _DATA: Data | None = None  # the diagnosis' data in this process (set by `Runner`)
@@ -57,26 +71,28 @@ def _residual(model: Model, part: str = "train") -> np.ndarray | None:
     return None if sims is None else residual_vector(_DATA, sims, part)
 
 
-def _piece(job: tuple) -> np.ndarray | None:
-    """The residual of recording i alone on a part (a piece of _residual); job (model, i[, part])."""
-    model, i, part = (*job, "train")[:3]
-    rec, train = _DATA.recordings[i], _DATA.train[i]
-    if not in_part(train, part).any():
-        return np.zeros(0)
-    try:
-        sim = resimulate(rec, model.effects, model.parameters, until=last_time(rec, train, part))
-    except SimulationError:
-        return None
-    sims = [sim if j == i else r for j, r in enumerate(_DATA.recordings)]  # the others give zeros
-    return residual_vector(_DATA, sims, part, only=i)
+def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
+    """The residual of recording i alone on a part (a piece of _residual) for each job (model, i, part),
+    all simulated in lockstep; None for a job whose simulation diverged."""
+    todo = [k for k, (_m, i, part) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
+    sims = resimulate_many([(_DATA.recordings[jobs[k][1]], jobs[k][0].effects, jobs[k][0].parameters,
+                             last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]))
+                            for k in todo], nthread)
+    out: list = [np.zeros(0)] * len(jobs)
+    for k, sim in zip(todo, sims):
+        _m, i, part = jobs[k]
+        if isinstance(sim, SimulationError):
+            out[k] = None
+            continue
+        recs = [sim if j == i else r for j, r in enumerate(_DATA.recordings)]  # the others give zeros
+        out[k] = residual_vector(_DATA, recs, part, only=i)
+    return out
 
 
-def _simulate_one(job: tuple) -> Recording | None:
-    model, i, noise_seed = (*job, None)[:3]
-    try:
-        return resimulate(_DATA.recordings[i], model.effects, model.parameters, noise_seed=noise_seed)
-    except SimulationError:
-        return None
+def _simulate_some(jobs: list[tuple], nthread: int = 1) -> list[Recording | None]:
+    """Recordings i re-simulated with their models, jobs (model, i, noise_seed), in lockstep."""
+    sims = resimulate_many([(_DATA.recordings[i], m.effects, m.parameters, None, seed) for m, i, seed in jobs], nthread)
+    return [None if isinstance(s, SimulationError) else s for s in sims]
 
 
 class Runner:
@@ -87,6 +103,7 @@ class Runner:
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
+        self.workers = workers if workers > 1 else 1
         self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C
                      if workers > 1 else None)
 
@@ -105,10 +122,24 @@ class Runner:
         return [f.result() for f in futures]
 
     def simulate(self, model: Model, noise_seed: int | None = None) -> list[Recording] | None:
-        """Every recording re-simulated with `model` (one job per recording; with `noise_seed` the rig's
+        """Every recording re-simulated with `model` (in lockstep; with `noise_seed` the rig's
         measurement noise on); None if one diverged."""
-        sims = self.map(_simulate_one, [(model, i, noise_seed) for i in range(len(self.data.recordings))])
+        sims = self.lockstep(_simulate_some, [(model, i, noise_seed) for i in range(len(self.data.recordings))])
         return None if any(s is None for s in sims) else sims
+
+    def lockstep(self, fn, jobs: list) -> list:
+        """fn(jobs share) -> a result per job, over one share per worker (here: one, on all threads)."""
+        if self.pool is None or len(jobs) <= 1:
+            self.jobs += len(jobs)
+            out = fn(jobs, 0)
+            self.jobs_done(len(jobs), len(jobs))
+            return out
+        n = min(self.workers, len(jobs))
+        bounds = np.linspace(0, len(jobs), n + 1).round().astype(int)
+        shares = [jobs[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+        done = self.map(fn, shares)
+        self.jobs += len(jobs) - len(shares)
+        return [r for share in done for r in share]
 
     def close(self, abort: bool = False) -> None:
         """Shut the pool down; on `abort` (Ctrl-C, an error) end its processes at once."""
@@ -130,7 +161,7 @@ def evaluator(runner: Runner | None, part: str = "train"):
 
     def evaluate(models):
         n = len(runner.data.recordings)
-        pieces = runner.map(_piece, [(m, i, part) for m in models for i in range(n)])
+        pieces = runner.lockstep(_pieces, [(m, i, part) for m in models for i in range(n)])
         out = []
         for k in range(len(models)):
             mine = pieces[k * n:(k + 1) * n]

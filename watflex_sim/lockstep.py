@@ -1,0 +1,185 @@
+"""Many simulations in lockstep: B scenarios of one rig stepped together on `mujoco.batch.Batch`.
+
+One physics, two drivers: each scenario is set up by `engine.ControlLoop` and runs its control
+half (`ControlLoop.control`: sensors, controller, converters, saturation, effects) on its own
+objects, which read and write rows of the batch's live arrays; the physics of all of them is one
+`Batch.step` per physics step, with the joint friction computed for the whole batch on arrays
+between steps (joint_friction.BatchFriction) instead of a per-simulation passive callback.
+Scenarios whose models differ in structure (segments, locked joints, added bodies or joints) run
+in separate batches; within one, the model fields that differ are per-simulation (`expand`). A
+scenario alone in its structure runs on the single-run driver (engine.run), which costs less there.
+"""
+from __future__ import annotations
+
+import logging
+import time as wallclock
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from .engine import CHECK_EVERY, MAX_QVEL, ControlLoop, SimResult, SimulationError, Tape, run
+from .joint_friction import BatchFriction
+
+log = logging.getLogger(__name__)
+
+_ROWS = ("qpos", "qvel", "ctrl", "xpos", "site_xpos")  # the MjData fields rigs and the loop touch
+_SIZES = ("nq", "nv", "nu", "na", "nbody", "njnt", "ngeom", "nsite", "nsensordata", "neq", "ntendon",
+          "nmocap", "nuserdata", "nM", "nD", "nB", "nC", "nJmom", "nbvh", "nbvhstatic", "nbvhdynamic", "npair",
+          "nexclude", "nplugin", "nhistory")
+
+
+class _Rows:
+    """One simulation's rows of the batch's arrays under MjData's names (a rig's `data`)."""
+
+    def __init__(self, arrays: dict[str, np.ndarray], i: int):
+        for name, array in arrays.items():
+            setattr(self, name, array[i])
+
+
+def structure(model: mujoco.MjModel) -> tuple:
+    """What must be equal for two models to share a batch: the sizes MjData is laid out by."""
+    return tuple(getattr(model, n, 0) for n in _SIZES)
+
+
+def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
+                   nthread: int = 0) -> list[SimResult | SimulationError]:
+    """Run checked scenarios (scenario.load_scenario) of one or more rigs in lockstep; nthread 0: all CPUs.
+
+    Returns per scenario its SimResult (recording identical to `engine.simulate`'s, see
+    tests/test_lockstep.py) or the SimulationError that stopped it (the others go on).
+    Raises ConfigError for an impossible configuration, before anything runs.
+    """
+    loops = [ControlLoop(s, parameter_names) for s in scenarios]
+    groups: dict[tuple, list[int]] = {}
+    for i, loop in enumerate(loops):
+        groups.setdefault((structure(loop.model), loop.n_sub), []).append(i)
+    out: list = [None] * len(loops)
+    for members in groups.values():
+        if len(members) == 1:  # alone, the single-run driver is cheaper (same recording)
+            out[members[0]] = _alone(loops[members[0]])
+            continue
+        for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
+            out[i] = result
+    return out
+
+
+def _alone(loop: ControlLoop) -> SimResult | SimulationError:
+    try:
+        return run(loop)
+    except SimulationError as exc:
+        return exc
+
+
+class _Lockstep:
+    """One batch of loops whose models share a structure."""
+
+    def __init__(self, loops: list[ControlLoop], nthread: int):
+        self.loops = loops
+        first = loops[0].model
+        self.batch = batch = mjbatch.Batch(first, len(loops), nthread=nthread)
+        for field in sorted(mjbatch.MODEL_FIELDS):  # per-simulation values where the models differ
+            values = [_model_field(loop.model, field) for loop in loops]
+            if values[0] is None or all(np.array_equal(v, values[0]) for v in values[1:]):
+                continue
+            batch.expand(field)[:] = np.array(values).reshape(batch.expand(field).shape)
+        friction = [loop.friction for loop in loops]
+        self.friction = None
+        if any(f.joints for f in friction):
+            self.friction = BatchFriction(friction, batch.expand("dof_frictionloss"), first.nv)
+        n_state = mujoco.mjtState.mjSTATE_INTEGRATION
+        for i, loop in enumerate(loops):  # each set-up state (settled, at its initial values) into its row
+            mujoco.mj_getState(loop.model, loop.data, batch.state[i], n_state)
+        self.qpos, self.qvel, self.ctrl = batch.bind("qpos"), batch.bind("qvel"), batch.bind("ctrl")
+        self.bound_applied = batch.bind("qfrc_applied")
+        self.constraint = np.array([loop.data.qfrc_constraint for loop in loops])  # from each set-up forward
+        self.bound_constraint = batch.bind("qfrc_constraint")
+        self.applied = self.bound_applied.copy()  # what rigs apply (disturbances); friction is added to it
+        arrays = {"qpos": self.qpos, "qvel": self.qvel, "ctrl": self.ctrl, "xpos": batch.bind("xpos"),
+                  "site_xpos": batch.bind("site_xpos"), "qfrc_applied": self.applied}
+        self.disturbed = any(getattr(loop.rig, "_disturbances", None) for loop in loops)
+        tip = mujoco.mj_name2id(first, mujoco.mjtObj.mjOBJ_SITE, "tip")
+        for i, loop in enumerate(loops):
+            rows = _Rows(arrays, i)
+            loop.data = loop.rig.data = rows
+            if tip >= 0:
+                loop.rig._tip_xpos = rows.site_xpos[tip]
+        batch.forward(stage=mujoco.mjtStage.mjSTAGE_POS)  # positions for the first sensors and frames
+
+    def run(self) -> list[SimResult | SimulationError]:
+        loops, batch = self.loops, self.batch
+        tapes = [Tape(loop) for loop in loops]
+        n_sub = loops[0].n_sub
+        failed: dict[int, SimulationError] = {}
+        start = wallclock.perf_counter()
+        for k in range(max(loop.n_ticks for loop in loops)):
+            live = [i for i, loop in enumerate(loops) if k < loop.n_ticks and i not in failed]
+            if not live:
+                break
+            for i in live:
+                tapes[i].frame(k)
+                tapes[i].write(k, *loops[i].control(k))
+            ids = np.array(live) if len(live) < len(loops) else None
+            # positions after the tick (engine: mj_kinematics) only where the next tick reads them
+            positions = any(_reads_positions(loops[i], tapes[i], k + 1) for i in live)
+            for j in range(n_sub):
+                self._forces()
+                last = j == n_sub - 1 or self.friction is None
+                try:
+                    batch.step(ids, nstep=1 if self.friction is not None else n_sub,
+                               stage=mujoco.mjtStage.mjSTAGE_POS if last and positions else mujoco.mjtStage.mjSTAGE_NONE)
+                except mjbatch.SimulationError as exc:
+                    for i in exc.ids:
+                        failed[int(i)] = SimulationError(f"simulation failed (at t = {k * loops[i].period:.3f} s): "
+                                                         f"{batch.error(int(i))}; nothing was written")
+                    live = [i for i in live if i not in failed]
+                    ids = np.array(live)
+                if self.friction is not None:
+                    self.constraint[:] = self.bound_constraint
+                if last:
+                    break
+            for i in live:
+                try:
+                    loops[i].monitor.update(loops[i].data, k)
+                except SimulationError as exc:
+                    failed[i] = exc
+            if k % CHECK_EVERY == CHECK_EVERY - 1 or k in {loop.n_ticks - 1 for loop in loops}:
+                self._check(live, k, failed)
+        wall = (wallclock.perf_counter() - start) / len(loops)  # s per simulation
+        for i, exc in failed.items():
+            log.info("%s dropped from its batch: %s", loops[i].scenario["name"], exc)
+        return [failed.get(i) or tape.result(wall) for i, tape in enumerate(tapes)]
+
+    def _forces(self) -> None:
+        """Friction (levels and torques) and the rigs' applied forces for the coming physics step."""
+        if self.friction is not None:
+            torque = self.friction.step(self.qpos, self.qvel, self.constraint)
+            np.add(self.applied, torque, out=self.bound_applied)
+        elif self.disturbed:
+            self.bound_applied[:] = self.applied
+
+    def _check(self, live: list[int], k: int, failed: dict) -> None:
+        """engine._check_state for the whole batch: MuJoCo warnings, velocity not finite or too large."""
+        warned = self.batch.warning.reshape(len(self.loops), -1).any(axis=1)
+        speed = np.einsum("ij,ij->i", self.qvel, self.qvel)
+        for i in live:
+            if i in failed or k >= self.loops[i].n_ticks:
+                continue
+            if warned[i] or not speed[i] < MAX_QVEL**2:
+                t = (k + 1) * self.loops[i].period
+                cause = "a MuJoCo warning" if warned[i] else f"velocity not finite or above {MAX_QVEL:g}"
+                failed[i] = SimulationError(f"simulation diverged (detected at t = {t:.3f} s): {cause}; "
+                                            "try a smaller timestep or lower gains; nothing was written")
+
+
+def _reads_positions(loop: ControlLoop, tape: Tape, k: int) -> bool:
+    """Whether tick k's sensors or arm drawing read body or site positions (the rig's positions_every)."""
+    every = loop.rig.positions_every
+    return (every and k % every == 0) or k % tape.frame_every == 0
+
+
+def _model_field(model: mujoco.MjModel, field: str):
+    """An MjModel field by its Batch name ('opt.timestep' for an option), as an array; None if absent."""
+    owner, name = (model.opt, field[4:]) if field.startswith("opt.") else (model, field)
+    value = getattr(owner, name, None)
+    return None if value is None else np.asarray(value)
