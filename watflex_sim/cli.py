@@ -244,6 +244,7 @@ def cmd_plot(args) -> int:
 
 def cmd_diagnose(args) -> int:
     from .diagnosis import diagnose
+    from .diagnosis.data import MIN_SPAN_S
     from .report import summary, write_report
 
     rig = _loaded_rig(args.rig)
@@ -252,8 +253,8 @@ def cmd_diagnose(args) -> int:
     for path in args.recordings:
         rec = _read(path, rig)
         span = float(rec.time[-1] - rec.time[0])
-        if span < 0.05:
-            raise ConfigError(f"{path}: recording shorter than 50 ms ({span * 1e3:.3g} ms), too short to simulate")
+        if span < MIN_SPAN_S:  # checked here too, to name the file before the others are read
+            raise ConfigError(f"{path}: recording shorter than {MIN_SPAN_S * 1e3:g} ms ({span * 1e3:.3g} ms), too short to simulate")
         step = float(np.median(np.diff(rec.time)))
         if step >= 0.1 or span > MAX_DURATION_S:
             raise ConfigError(f"{path}: time looks like milliseconds or is too long (median step {step:g} s, span "

@@ -27,6 +27,8 @@ BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
 
+MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate and diagnose
+
 
 @dataclass
 class Model:
@@ -110,8 +112,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     outputs = set(rig.of_kind("measured"))
     channels, scale, noise, train, blocks = [], [], [], [], []
     for rec, name in zip(recordings, names):
-        if rec.time[-1] - rec.time[0] < 0.05:
-            raise ConfigError(f"{name}: recording shorter than 50 ms, too short to simulate")
+        if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
+            raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
         wanted = outputs | (set(rig.of_kind("command")) if closed else set())
         chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
