@@ -26,7 +26,6 @@ BLOCKS_PER_RECORDING = 60  # alternate blocks per recording (train, validate, tr
 BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
-
 MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate and diagnose
 
 
