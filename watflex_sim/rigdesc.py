@@ -41,7 +41,7 @@ CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
-        "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
+        "control_jitter_s", "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
 # velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
 QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
@@ -66,6 +66,7 @@ class RigDescription:
     mat_channels: dict | None = None  # channel -> {file, variable, column?, scale?}: one .mat file per signal
     mat_time: dict | None = None  # {file, variable, column?, scale?}: where the time is (scale to s)
     control_period_s: float = CONTROL_PERIOD  # s, the rig's sample period (controller and sensors)
+    control_jitter_s: float = 0.0  # s, each command reaches the plant 0..this late (engine.ControlLoop)
     mat_scalars: tuple = ()  # 1x1 .mat variables kept for the sidecar ("mat:NAME")
     sidecar: dict | None = None  # default sidecar for files that come without one (--rig)
     description: str = ""
@@ -153,6 +154,9 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     steps = period / CONTROL_PERIOD if isinstance(period, (int, float)) and not isinstance(period, bool) else 0
     if steps < 1 or abs(steps - round(steps)) > 1e-9:
         fail(f"control_period_s must be a whole multiple of {CONTROL_PERIOD:g} s, got {period!r}")
+    jitter = raw.get("control_jitter_s", 0.0)
+    if isinstance(jitter, bool) or not isinstance(jitter, (int, float)) or not 0 <= jitter < period:
+        fail(f"control_jitter_s must be a number of s, >= 0 and below control_period_s ({period:g} s), got {jitter!r}")
     for name, spec in raw.get("parameters", {}).items():
         if not isinstance(spec, dict) or spec.get("knob") not in KNOBS or "target" not in spec \
                 or not 0 < spec.get("tolerance", -1) < 1:
@@ -179,7 +183,7 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
         effects=raw.get("effects", {}), time_variable=raw.get("time_variable", "time"),
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
         description=raw.get("description", ""), source=source, mat_channels=raw.get("mat_channels"),
-        mat_time=raw.get("mat_time"), control_period_s=float(period),
+        mat_time=raw.get("mat_time"), control_period_s=float(period), control_jitter_s=float(jitter),
         datasheet=datasheet if "datasheet" in raw else None,
     )
     if description.model == DATASHEET:
