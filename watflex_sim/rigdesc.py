@@ -43,8 +43,9 @@ KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "eff
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
         "control_jitter_s", "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
-# velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
-QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
+# velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, or the
+# current (A) of a datasheet drive (`actuator`).
+QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain", "current")
 # Keys a channel may have (rigs.GenericRig reads them; the other sensor models read unit, kind, noise).
 CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", "step", "noise", "filter_hz",
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
@@ -175,7 +176,7 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
             value = table.get(role)
             for name in [value] if isinstance(value, str) else value if isinstance(value, list) else []:
                 name = name.removeprefix("rate:") if isinstance(name, str) else name  # a channel's rate (state_feedback)
-                if raw["sensors"] == "generic" and name not in raw["channels"]:
+                if raw["sensors"] == "generic" and name != "" and name not in raw["channels"]:  # "": none (pid reference 0)
                     fail(f"{where}.{role}: unknown channel {name!r} (channels: {', '.join(raw['channels'])})")
     description = RigDescription(
         name=raw.get("name", default_name), model=raw["model"], sensors=raw["sensors"], channels=raw["channels"],
@@ -188,6 +189,8 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     )
     if description.model == DATASHEET:
         _command_defaults(description, fail)
+    elif any(spec.get("quantity") == "current" for spec in description.channels.values()):
+        fail("quantity 'current' reads a datasheet drive: the rig needs a [datasheet]")
     if description.sensors == "generic":
         _check_model(description, fail)
     return description
@@ -200,6 +203,8 @@ def _command_defaults(description: RigDescription, fail) -> None:
 
     drives = command_defaults(description.datasheet)
     for channel, spec in description.channels.items():
+        if spec.get("quantity") == "current" and spec["kind"] == "measured" and spec["actuator"] not in drives:
+            fail(f"channel {channel!r}: actuator {spec['actuator']!r} is not a datasheet drive (drives: {', '.join(drives)})")
         if spec["kind"] != "command" or spec.get("actuator") not in drives:
             continue
         drive = drives[spec["actuator"]]
@@ -253,6 +258,10 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
     if quantity not in QUANTITIES:
         fail(f"channel {channel!r}: quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
     if not generic or spec["kind"] != "measured":
+        return
+    if quantity == "current":
+        if "actuator" not in spec:
+            fail(f"channel {channel!r}: quantity 'current' needs the actuator of a datasheet drive")
         return
     if "joint" not in spec and "link" not in spec:
         fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain)")
