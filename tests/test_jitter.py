@@ -90,5 +90,5 @@ def test_jitter_must_be_below_the_period_and_not_negative(tmp_path, monkeypatch,
 
 def test_jitter_must_be_whole_physics_steps(tmp_path, monkeypatch):
     make_rig(tmp_path, monkeypatch, "0.0007")
-    with pytest.raises(ConfigError, match="control_jitter_s 0.0007 s is not a whole number of physics steps"):
+    with pytest.raises(ConfigError, match="rig.toml: control_jitter_s 0.0007 s is not a whole number of physics steps"):
         ControlLoop(scenario(tmp_path))

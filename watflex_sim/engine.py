@@ -293,7 +293,8 @@ class ControlLoop:
                              if round(n * ticks) > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
-        self.delays = _output_delays(self.jitter, self.model.opt.timestep, self.n_sub, self.n_ticks, scenario["seed"])
+        self.delays = _output_delays(self.jitter, self.model.opt.timestep, self.n_sub, self.n_ticks, scenario["seed"],
+                                     load_rig(rig_name).source)
         self._applied, self._due = self.data.ctrl.copy(), 0  # the plant input held, substep the new one is due
 
     def __enter__(self) -> "ControlLoop":
@@ -361,14 +362,16 @@ class ControlLoop:
         return obs
 
 
-def _output_delays(jitter: float, timestep: float, n_sub: int, n_ticks: int, seed: int) -> np.ndarray | None:
+def _output_delays(jitter: float, timestep: float, n_sub: int, n_ticks: int, seed: int,
+                   source: str) -> np.ndarray | None:
     """Per tick, the physics substeps by which the command reaches the plant late: uniform on
-    0..round(jitter / timestep) (mean jitter / 2, s), drawn from the scenario's seed; None without jitter."""
+    0..round(jitter / timestep) (mean jitter / 2, s), drawn from the scenario's seed; None without jitter.
+    ConfigError naming the rig file `source` unless jitter is whole physics steps below the period."""
     if not jitter:
         return None
     most = round(jitter / timestep)
     if abs(most * timestep - jitter) > 1e-9 * jitter or most >= n_sub:
-        raise ConfigError(f"control_jitter_s {jitter:g} s is not a whole number of physics steps "
+        raise ConfigError(f"{source}: control_jitter_s {jitter:g} s is not a whole number of physics steps "
                           f"({timestep * 1e3:g} ms) below the control period")
     return np.random.default_rng([seed, 0x6A17]).integers(0, most + 1, size=n_ticks)
 
