@@ -1,14 +1,14 @@
-"""Joint PD for the Watflex arm (rigs.md §2 'Single-joint elbow experiment')."""
+"""Joint PD for the Watflex arm (rigs.md §2 'Single-joint elbow experiment'), an instance of StateFeedback."""
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Sequence
 
 from watflex_sim.params import CONTROL_PERIOD
 
-from .filters import Butterworth2
+from .state_feedback import StateFeedback
 
 
-class PDJoint:
+class PDJoint(StateFeedback):
     """tau_j = Kp_j (theta_ref_j - theta_j) - Kd_j dtheta_j  (N m) for each joint in `joints`.
 
     dtheta is the encoder's backward difference (rad/s) through a 2nd-order Butterworth at
@@ -19,22 +19,10 @@ class PDJoint:
                  kd: Sequence[float] = (12.0,), filter_hz: float = 10.0, period: float = CONTROL_PERIOD):
         if not (len(joints) == len(kp) == len(kd)):
             raise ValueError("pd_joint: 'joints', 'kp' and 'kd' must have the same length")
-        self.joints, self.kp, self.kd = list(joints), [float(k) for k in kp], [float(k) for k in kd]
-        self.period = float(period)
-        self.filters = [Butterworth2(filter_hz, 1.0 / period) for _ in self.joints]
-        self.reset()
-
-    def reset(self) -> None:
-        self._previous = [None] * len(self.joints)
-        for f in self.filters:
-            f.reset()
-
-    def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
-        out = {}
-        for i, j in enumerate(self.joints):
-            theta = obs[f"{j}_angle"]
-            prev = self._previous[i]
-            rate = self.filters[i](0.0 if prev is None else (theta - prev) / self.period)
-            self._previous[i] = theta
-            out[f"{j}_torque_cmd"] = self.kp[i] * (obs[f"{j}_reference"] - theta) - self.kd[i] * rate
-        return out
+        states = [s for j in joints for s in (f"{j}_angle", f"rate:{j}_angle")]
+        gains = [[0.0] * len(states) for _ in joints]  # block diagonal: joint i's (kp, kd)
+        for i, (p, d) in enumerate(zip(kp, kd)):
+            gains[i][2 * i: 2 * i + 2] = [float(p), float(d)]
+        super().__init__(commands=[f"{j}_torque_cmd" for j in joints], states=states, gains=gains,
+                         references={f"{j}_angle": f"{j}_reference" for j in joints}, rate_hz=filter_hz,
+                         rate_method="butterworth_difference", period=period)

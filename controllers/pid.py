@@ -12,7 +12,7 @@ from .state_feedback import RateFilter
 class PID:
     """u = kp e + ki integral(e) - kd d(position)/dt - kl deflection, e = reference - position.
 
-    Channels by name: `command`, `position`, `reference`, and optionally `deflection` (a link's
+    Channels by name: `command`, `position`, `reference` ("" for a reference of 0), and optionally `deflection` (a link's
     deflection channel, gain kl). The rate is the filtered difference of `position` (RateFilter
     at rate_hz, rate_zeta, rate_method). The output is clipped to +-limit (command units; the integral stops
     while clipped) and optionally low-passed (command_filter_hz, 1st order). period in s.
@@ -35,11 +35,11 @@ class PID:
 
     def channels(self) -> set[str]:
         """The measured channels the law reads."""
-        return {self.position, self.reference} | ({self.deflection} if self.deflection else set())
+        return {self.position} | {c for c in (self.reference, self.deflection) if c}
 
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         q = obs[self.position]
-        e = obs[self.reference] - q
+        e = (obs[self.reference] if self.reference else 0.0) - q
         u = self.kp * e + self.ki * self.integral - self.kd * self.rate(q)
         if self.deflection:
             u -= self.kl * obs[self.deflection]

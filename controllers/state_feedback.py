@@ -8,34 +8,52 @@ from scipy import signal
 
 from watflex_sim.params import CONTROL_PERIOD
 
+from .filters import Butterworth2
+
 
 class RateFilter:
-    """Rate of a sampled signal: H(s) = s wn^2 / (s^2 + 2 zeta wn s + wn^2) (a derivative through a
-    2nd-order low-pass; hz in Hz, period in s) discretised by scipy's cont2discrete `method`
-    (backward_diff, euler, bilinear, foh; not zoh, which assumes a staircase input and gets a
-    ramp's rate 2 % low at 40 Hz, 2 ms). hz = 0: the plain backward difference.
+    """Rate of a sampled signal (signal units/s), hz in Hz, period T in s, by `method`:
+
+    backward_diff, euler, bilinear, foh: H(s) = s wn^2 / (s^2 + 2 zeta wn s + wn^2) (a derivative
+    through a 2nd-order low-pass) discretised by scipy's cont2discrete `method` (not zoh, which
+    assumes a staircase input and gets a ramp's rate 2 % low at 40 Hz, 2 ms); with hz = 0 the
+    plain difference.
+    difference: (x(k) - x(k-1)) / T, unfiltered (hz, zeta unused).
+    difference2: (x(k) - x(k-2)) / (2 T), the 2-tap estimate (EMPS drive); 0 for the first two samples.
+    butterworth_difference: the difference through a 2nd-order Butterworth low-pass at hz
+    (filters.Butterworth2; zeta unused).
     Starts at rest at the first sample (rate 0)."""
 
-    METHODS = ("backward_diff", "euler", "bilinear", "foh")
+    METHODS = ("backward_diff", "euler", "bilinear", "foh", "difference", "difference2", "butterworth_difference")
 
     def __init__(self, hz: float, zeta: float, period: float, method: str = "backward_diff"):
         if method not in self.METHODS:
             raise ValueError(f"rate_method must be one of {', '.join(self.METHODS)}, got {method!r}")
-        if hz:
+        if method == "butterworth_difference" and not hz > 0:
+            raise ValueError("rate_method 'butterworth_difference' needs rate_hz > 0")
+        self.period = period
+        self.taps = 2 if method == "difference2" else 1  # samples the difference spans
+        self.smooth = Butterworth2(hz, 1.0 / period) if method == "butterworth_difference" else None
+        self.plain = method in ("difference", "difference2", "butterworth_difference") or not hz
+        if not self.plain:
             wn = 2 * math.pi * hz
             b, a, _ = signal.cont2discrete(([wn**2, 0.0], [1.0, 2 * zeta * wn, wn**2]), period, method=method)
-        else:
-            b, a = [[1.0 / period, -1.0 / period]], [1.0, 0.0]
-        self.a0 = float(a[0])
-        self.b = [float(x) / self.a0 for x in b[0]]
-        self.a = [float(x) / self.a0 for x in a[1:]]
+            self.b = [float(x) / float(a[0]) for x in b[0]]
+            self.a = [float(x) / float(a[0]) for x in a[1:]]
         self.reset()
 
     def reset(self) -> None:
         self.x: list[float] | None = None
-        self.y = [0.0] * len(self.a)
+        if not self.plain:
+            self.y = [0.0] * len(self.a)
+        if self.smooth:
+            self.smooth.reset()
 
     def __call__(self, value: float) -> float:
+        if self.plain:  # the last taps + 1 samples
+            self.x = ([] if self.x is None else self.x)[-self.taps:] + [value]
+            rate = (value - self.x[0]) / (self.taps * self.period) if len(self.x) > self.taps else 0.0
+            return self.smooth(rate) if self.smooth else rate
         if self.x is None:  # at rest at the first value
             self.x = [value] * len(self.b)
         self.x = [value] + self.x[:-1]

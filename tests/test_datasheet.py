@@ -215,6 +215,51 @@ def test_watflex_link2_numbers_give_the_bundled_models_link():
     assert j.damping[0] / j.stiffness[0] == pytest.approx(b.damping_beta, rel=1e-9)
 
 
+VOLTAGE_DRIVE = '{ type = "voltage", actuator = "shoulder_motor", torque_constant = 0.1, resistance = 1.5, limit = 6.0 }'
+
+
+@pytest.mark.parametrize("drive", ["current", "voltage"])
+def test_motor_current_channel_is_the_drive_closed_form(tmp_path, monkeypatch, drive):
+    """quantity = "current" on labarm's drive (A): a current drive reads the commanded current after the
+    amplifier limit (2 A), i.e. the command held since the last tick; a voltage drive (Km 0.1 N m/A,
+    Kg 50, R 1.5 ohm, 6 V [ours]) reads i = (V - Km Kg w) / R, w the hub speed at the sample (rad/s).
+    Noise off, 1 s, a 0.5 rad step: equal to 1e-12 A (rounding: the sensor multiplies by 1/R or 1/(eta Kt Kg);
+    measured 4.4e-16 A); measured peaks: 2.0 A (the limit) on the current drive, 3.2 A on the voltage
+    drive with a back-EMF term up to 4.3 A."""
+    monkeypatch.setenv("WATFLEX_RIGS", str(tmp_path / "labarm"))
+    rig = RIG.format(link=LINK).replace(
+        'current_cmd = { unit = "A"',
+        'current = { unit = "A", kind = "measured", quantity = "current", actuator = "shoulder_motor" }\n'
+        'hub_rate = { unit = "rad/s", kind = "measured", joint = "shoulder", quantity = "velocity" }\n'
+        'current_cmd = { unit = "A"')
+    scenario = SCENARIO.replace("kp = 5.0", "kp = 40.0").replace("kd = 0.5", "kd = 2.0").replace(
+        'kind = "triangle", amplitude = 0.5, slope = 1.0, periods = 1', 'kind = "step", amplitude = 0.5, time_s = 0.1')
+    if drive == "voltage":
+        rig = rig.replace('drive = { type = "current", actuator = "shoulder_motor", torque_constant = 0.1, efficiency = 0.8, '
+                          'limit = 2.0, bits = 12 }', f"drive = {VOLTAGE_DRIVE}")
+        rig, scenario = (text.replace("current_cmd", "voltage_cmd").replace('unit = "A", kind = "command"', 'unit = "V", kind = "command"')
+                         for text in (rig, scenario))
+        assert "voltage_cmd = { unit = \"V\"" in rig
+    (tmp_path / "labarm").mkdir()
+    (tmp_path / "labarm" / "rig.toml").write_text(rig)
+    (tmp_path / "moves.toml").write_text(scenario)
+    from watflex_sim.engine import simulate
+    from watflex_sim.scenario import load_scenario
+
+    rec = simulate(load_scenario(str(tmp_path / "moves.toml"), ["noise=false", "duration_s=1.0", "effects=[]"])).recording
+    current = rec.channels["current"]
+    if drive == "current":
+        command = rec.channels["current_cmd"]
+        expected = np.concatenate([[0.0], np.clip(command[:-1], -2.0, 2.0)])
+        assert np.abs(command).max() == pytest.approx(2.0)  # the limit is reached
+    else:
+        volts = np.concatenate([[0.0], np.clip(rec.channels["voltage_cmd"][:-1], -6.0, 6.0)])
+        expected = (volts - 0.1 * 50.0 * rec.channels["hub_rate"]) / 1.5
+        assert np.abs(0.1 * 50.0 * rec.channels["hub_rate"]).max() / 1.5 > 0.5  # back-EMF matters
+    np.testing.assert_allclose(current, expected, rtol=0, atol=1e-12)
+    assert np.abs(current).max() > 0.5
+
+
 @pytest.mark.slow
 def test_a_rig_only_in_a_temporary_folder_is_simulated_and_diagnosed(tmp_path, monkeypatch, capsys):
     """Done-when of issue 15 item 2: rig.toml (datasheet, sensors, a PID) in tmp_path and nothing else; its
@@ -265,3 +310,20 @@ def test_bad_datasheet_is_one_line_naming_file_and_key(tmp_path, monkeypatch, ca
 def test_a_torsional_link_needs_its_stiffness():
     with pytest.raises(ConfigError, match=r"test.toml: datasheet.stages\[1\].link.EI: missing"):
         stage_datasheet('{ type = "torsional_spring", name = "load", length = 0.1 }')
+
+
+@pytest.mark.parametrize("edit, why", [
+    (lambda t: t.replace('quantity = "current", actuator = "shoulder_motor"', 'quantity = "current"'),
+     "channel 'current': quantity 'current' needs the actuator of a datasheet drive"),
+    (lambda t: t.replace('quantity = "current", actuator = "shoulder_motor"', 'quantity = "current", actuator = "nope"'),
+     "channel 'current': actuator 'nope' is not a datasheet drive"),
+])
+def test_a_current_channel_names_a_datasheet_drive(tmp_path, edit, why):
+    from watflex_sim.rigdesc import load_rig
+
+    rig = RIG.format(link=LINK).replace(
+        'current_cmd = { unit = "A"',
+        'current = { unit = "A", kind = "measured", quantity = "current", actuator = "shoulder_motor" }\ncurrent_cmd = { unit = "A"')
+    (tmp_path / "labarm.toml").write_text(edit(rig))
+    with pytest.raises(ConfigError, match=f"labarm.toml: {why}"):
+        load_rig(str(tmp_path / "labarm.toml"))

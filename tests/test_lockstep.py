@@ -82,3 +82,12 @@ def test_a_diverging_member_is_dropped_and_the_others_go_on():
     with pytest.raises(SimulationError):
         simulate(bad)
     assert max(_max_differences(simulate(good).recording, ok.recording).values()) == 0.0
+
+
+def test_jittered_commands_match_single_runs(tmp_path, monkeypatch):
+    """A rig with control_jitter_s (tests/test_jitter.py's EMPS copy, 2 ms period, 1.5 ms jitter):
+    each simulation releases its command at its own substep (ControlLoop.release), two seeds."""
+    from test_jitter import make_rig, scenario
+
+    make_rig(tmp_path, monkeypatch, "0.0015")
+    _compare([scenario(tmp_path, [f"seed={s}"], duration=0.6) for s in (1, 2)])

@@ -179,6 +179,16 @@ def back_emf(stage: dict) -> float:
     return drive.get("back_emf", drive["torque_constant"] * stage.get("gear", 1.0))
 
 
+def current_law(stage: dict) -> tuple[float, float, float]:
+    """(Ke V s/rad, A per actuator input, current limit A) with i = (u - Ke w) x per_input, u the actuator
+    input after its range, w the joint speed (rad/s): a current drive's u is the output torque (N m, Ke 0,
+    per_input 1 / (eta Kt Kg)); a voltage drive's u is V, i = (V - Ke w) / R, clipped at current_limit."""
+    drive = stage["drive"]
+    if drive["type"] == "current":
+        return 0.0, 1.0 / torque_per_amp(stage), math.inf
+    return back_emf(stage), 1.0 / drive["resistance"], drive.get("current_limit", math.inf)
+
+
 def command_gain(stage: dict) -> float:
     """Actuator input per command unit: N m/A for a current drive, 1 (V/V) for a voltage drive."""
     return torque_per_amp(stage) if stage["drive"]["type"] == "current" else 1.0

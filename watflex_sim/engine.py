@@ -256,6 +256,7 @@ class ControlLoop:
         # s: the scenario's (a recording's sidecar) sample period, else the rig's
         self.period = period = scenario.get("control_period_s") or load_rig(rig_name).control_period_s
         self.n_sub = substeps(period, self.model.opt.timestep)
+        self.jitter = load_rig(rig_name).control_jitter_s  # s
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
@@ -292,6 +293,9 @@ class ControlLoop:
                              if round(n * ticks) > 0}  # filled by the first reading
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
+        self.delays = _output_delays(self.jitter, self.model.opt.timestep, self.n_sub, self.n_ticks, scenario["seed"],
+                                     load_rig(rig_name).source)
+        self._applied, self._due = self.data.ctrl.copy(), 0  # the plant input held, substep the new one is due
 
     def __enter__(self) -> "ControlLoop":
         self.friction.__enter__()
@@ -303,7 +307,10 @@ class ControlLoop:
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
         obs, recorded = self.control(k)
-        mujoco.mj_step(self.model, self.data, nstep=self.n_sub)
+        if self._due:  # jitter: the previous command holds until the new one is due
+            mujoco.mj_step(self.model, self.data, nstep=self._due)
+            self.release(self._due)
+        mujoco.mj_step(self.model, self.data, nstep=self.n_sub - self._due)
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         self.monitor.update(self.data, k)
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:
@@ -327,7 +334,18 @@ class ControlLoop:
             u = self.data.ctrl[actuator] / scale * gain + offset
             self.data.ctrl[actuator] = scale * max(-limit, min(limit, u))
         recorded.update(self._sense(self.rig.monitor()) if self.patch.sensor else self.rig.monitor())
+        if self.delays is not None:  # the new plant input waits delays[k] substeps (release)
+            self._due = int(self.delays[k])
+            if self._due:
+                self._applied, self.data.ctrl[:] = self.data.ctrl.copy(), self._applied
+            else:
+                self._applied = self.data.ctrl.copy()
         return obs, recorded
+
+    def release(self, j: int) -> None:
+        """Before physics substep j of a tick: the new plant input arrives if it is due (jitter)."""
+        if j == self._due and j:
+            self.data.ctrl[:] = self._applied
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
         """Sensor gain/offset and delay effects on the measured channels."""
@@ -342,6 +360,20 @@ class ControlLoop:
                 fifo.append(obs[channel])
                 obs[channel] = fifo.pop(0)
         return obs
+
+
+def _output_delays(jitter: float, timestep: float, n_sub: int, n_ticks: int, seed: int,
+                   source: str) -> np.ndarray | None:
+    """Per tick, the physics substeps by which the command reaches the plant late: uniform on
+    0..round(jitter / timestep) (mean jitter / 2, s), drawn from the scenario's seed; None without jitter.
+    ConfigError naming the rig file `source` unless jitter is whole physics steps below the period."""
+    if not jitter:
+        return None
+    most = round(jitter / timestep)
+    if abs(most * timestep - jitter) > 1e-9 * jitter or most >= n_sub:
+        raise ConfigError(f"{source}: control_jitter_s {jitter:g} s is not a whole number of physics steps "
+                          f"({timestep * 1e3:g} ms) below the control period")
+    return np.random.default_rng([seed, 0x6A17]).integers(0, most + 1, size=n_ticks)
 
 
 def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
@@ -412,6 +444,7 @@ class Tape:
             "controller": controller_meta,
             "mode": "open_loop" if controller_meta["type"] in ("none", "open_loop") else "closed_loop",
             "control_period_s": period,
+            **({"control_jitter_s": loop.jitter} if loop.jitter else {}),
             "locked_joints": scenario["locked_joints"],
             "notes": scenario["notes"] or f"simulated by watflex-sim {__version__}",
             "seed": scenario["seed"],

@@ -98,6 +98,8 @@ class _Lockstep:
         arrays = {"qpos": self.qpos, "qvel": self.qvel, "ctrl": self.ctrl, "xpos": batch.bind("xpos"),
                   "site_xpos": batch.bind("site_xpos"), "qfrc_applied": self.applied}
         self.disturbed = any(getattr(loop.rig, "_disturbances", None) for loop in loops)
+        self.jittered = any(loop.delays is not None for loop in loops)  # commands due within a tick
+        self.substepped = self.friction is not None or self.jittered  # one Batch.step per physics step
         tip = mujoco.mj_name2id(first, mujoco.mjtObj.mjOBJ_SITE, "tip")
         for i, loop in enumerate(loops):
             rows = _Rows(arrays, i)
@@ -124,9 +126,12 @@ class _Lockstep:
             positions = any(_reads_positions(loops[i], tapes[i], k + 1) for i in live)
             for j in range(n_sub):
                 self._forces()
-                last = j == n_sub - 1 or self.friction is None
+                if self.jittered:  # a command due at substep j reaches its plant now
+                    for i in live:
+                        loops[i].release(j)
+                last = j == n_sub - 1 or not self.substepped
                 try:
-                    batch.step(ids, nstep=1 if self.friction is not None else n_sub,
+                    batch.step(ids, nstep=1 if self.substepped else n_sub,
                                stage=mujoco.mjtStage.mjSTAGE_POS if last and positions else mujoco.mjtStage.mjSTAGE_NONE)
                 except mjbatch.SimulationError as exc:
                     for i in exc.ids:

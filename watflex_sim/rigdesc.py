@@ -41,10 +41,11 @@ CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
-        "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
+        "control_jitter_s", "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
-# velocity, a link's tip deflection (m) or its angle (rad), or the strain at x on a link.
-QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain")
+# velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, or the
+# current (A) of a datasheet drive (`actuator`).
+QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain", "current")
 # Keys a channel may have (rigs.GenericRig reads them; the other sensor models read unit, kind, noise).
 CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", "step", "noise", "filter_hz",
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
@@ -66,6 +67,7 @@ class RigDescription:
     mat_channels: dict | None = None  # channel -> {file, variable, column?, scale?}: one .mat file per signal
     mat_time: dict | None = None  # {file, variable, column?, scale?}: where the time is (scale to s)
     control_period_s: float = CONTROL_PERIOD  # s, the rig's sample period (controller and sensors)
+    control_jitter_s: float = 0.0  # s, each command reaches the plant 0..this late (engine.ControlLoop)
     mat_scalars: tuple = ()  # 1x1 .mat variables kept for the sidecar ("mat:NAME")
     sidecar: dict | None = None  # default sidecar for files that come without one (--rig)
     description: str = ""
@@ -153,6 +155,9 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     steps = period / CONTROL_PERIOD if isinstance(period, (int, float)) and not isinstance(period, bool) else 0
     if steps < 1 or abs(steps - round(steps)) > 1e-9:
         fail(f"control_period_s must be a whole multiple of {CONTROL_PERIOD:g} s, got {period!r}")
+    jitter = raw.get("control_jitter_s", 0.0)
+    if isinstance(jitter, bool) or not isinstance(jitter, (int, float)) or not 0 <= jitter < period:
+        fail(f"control_jitter_s must be a number of s, >= 0 and below control_period_s ({period:g} s), got {jitter!r}")
     for name, spec in raw.get("parameters", {}).items():
         if not isinstance(spec, dict) or spec.get("knob") not in KNOBS or "target" not in spec \
                 or not 0 < spec.get("tolerance", -1) < 1:
@@ -171,7 +176,7 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
             value = table.get(role)
             for name in [value] if isinstance(value, str) else value if isinstance(value, list) else []:
                 name = name.removeprefix("rate:") if isinstance(name, str) else name  # a channel's rate (state_feedback)
-                if raw["sensors"] == "generic" and name not in raw["channels"]:
+                if raw["sensors"] == "generic" and name != "" and name not in raw["channels"]:  # "": none (pid reference 0)
                     fail(f"{where}.{role}: unknown channel {name!r} (channels: {', '.join(raw['channels'])})")
     description = RigDescription(
         name=raw.get("name", default_name), model=raw["model"], sensors=raw["sensors"], channels=raw["channels"],
@@ -179,11 +184,13 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
         effects=raw.get("effects", {}), time_variable=raw.get("time_variable", "time"),
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
         description=raw.get("description", ""), source=source, mat_channels=raw.get("mat_channels"),
-        mat_time=raw.get("mat_time"), control_period_s=float(period),
+        mat_time=raw.get("mat_time"), control_period_s=float(period), control_jitter_s=float(jitter),
         datasheet=datasheet if "datasheet" in raw else None,
     )
     if description.model == DATASHEET:
         _command_defaults(description, fail)
+    elif any(spec.get("quantity") == "current" for spec in description.channels.values()):
+        fail("quantity 'current' reads a datasheet drive: the rig needs a [datasheet]")
     if description.sensors == "generic":
         _check_model(description, fail)
     return description
@@ -196,6 +203,8 @@ def _command_defaults(description: RigDescription, fail) -> None:
 
     drives = command_defaults(description.datasheet)
     for channel, spec in description.channels.items():
+        if spec.get("quantity") == "current" and spec["kind"] == "measured" and spec["actuator"] not in drives:
+            fail(f"channel {channel!r}: actuator {spec['actuator']!r} is not a datasheet drive (drives: {', '.join(drives)})")
         if spec["kind"] != "command" or spec.get("actuator") not in drives:
             continue
         drive = drives[spec["actuator"]]
@@ -249,6 +258,10 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
     if quantity not in QUANTITIES:
         fail(f"channel {channel!r}: quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
     if not generic or spec["kind"] != "measured":
+        return
+    if quantity == "current":
+        if "actuator" not in spec:
+            fail(f"channel {channel!r}: quantity 'current' needs the actuator of a datasheet drive")
         return
     if "joint" not in spec and "link" not in spec:
         fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain)")

@@ -257,6 +257,9 @@ class GenericRig(Rig):
     deflection (m) is sum q_i (length - x_i) with x_i the hinge's distance from the first one,
     its angle that over length, and the strain at x the static tip-load shape's,
     3 t w_tip (length - x) / (2 length^3) (a cantilever with a tip force).
+    A `current` channel reads a datasheet drive's current (A) from the input held since the last
+    tick: datasheet.current_law (current drive: the command after the amplifier limit; voltage
+    drive: (V - Ke w) / R, w the joint speed).
     """
 
     def __init__(self, model, data, description, noise: bool, seed: int, period: float | None = None):
@@ -266,6 +269,7 @@ class GenericRig(Rig):
         self.command_channels = tuple(description.of_kind("command"))
         self._inputs = tuple(description.of_kind("reference") + description.of_kind("disturbance"))
         self._period = period or description.control_period_s  # s, the sample period the filters run at
+        self._datasheet = description.datasheet  # drives for current channels
         self._measured, self._commands, self._disturbances = [], {}, {}
         mujoco.mj_kinematics(model, data)
         for channel, spec in description.channels.items():
@@ -306,6 +310,8 @@ class GenericRig(Rig):
             if index is None:
                 return None
             return quantity, index, scale, offset, step, noise, alpha
+        if quantity == "current":
+            return "current", self._drive(spec["actuator"]), scale, offset, step, noise, alpha
         hinges = self._link(spec)
         if not hinges:
             return None
@@ -317,6 +323,16 @@ class GenericRig(Rig):
         else:
             weights = [(q, arm * per_metre[quantity]) for q, _d, arm in hinges]
         return "link", weights, scale, offset, step, noise, alpha
+
+    def _drive(self, actuator: str) -> tuple:
+        """(actuator id, its joint's dof, input range low, high, Ke, per_input, current limit) of a datasheet drive."""
+        from .datasheet import current_law
+
+        stage = next(st for st in self._datasheet["stages"] if st["drive"]["actuator"] == actuator)
+        a = self.model.actuator(actuator).id
+        low, high = self.model.actuator_ctrlrange[a] if self.model.actuator_ctrllimited[a] else (-math.inf, math.inf)
+        dof = int(self.model.jnt_dofadr[self.model.actuator_trnid[a, 0]])
+        return (a, dof, float(low), float(high), *current_law(stage))
 
     @property
     def input_channels(self) -> tuple[str, ...]:
@@ -333,6 +349,10 @@ class GenericRig(Rig):
                 x = qpos[index]
             elif kind == "velocity":
                 x = qvel[index]
+            elif kind == "current":
+                actuator, dof, low, high, emf, per_input, most = index
+                u = min(high, max(low, float(self.data.ctrl[actuator])))  # the input held since the last tick
+                x = clip((u - emf * qvel[dof]) * per_input, most)
             else:
                 x = sum(w * qpos[q] for q, w in index)
             value = scale * x + offset + (noise * self.gauss() if noise else 0.0)
@@ -357,7 +377,7 @@ class GenericRig(Rig):
         """Set the state so the sensors read `first` (channel -> value; noise, filter and steps aside):
         joint positions and velocities, and each link bent in its static tip-load shape."""
         for channel, kind, index, scale, offset, _step, _noise, _alpha in self._measured:
-            if channel not in first or not math.isfinite(first[channel]):
+            if channel not in first or not math.isfinite(first[channel]) or kind == "current":
                 continue
             x = (first[channel] - offset) / scale
             if kind == "position":
