@@ -141,6 +141,10 @@ def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
     train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
     assert train["worst_channel"] == "motor_current" and train["worst_ratio"] == pytest.approx(1.5, abs=0.1)
     assert train["noise_ratio"] < 1.3 and not within_noise(train, held)
+    sims[0].channels["motor_current"] = data.recordings[0].channels["motor_current"] + 3.0 * data.noise[0]["motor_current"]
+    sims[1].channels["motor_current"] = data.recordings[1].channels["motor_current"]
+    # the median over recordings: of two, their mean (3 x and 0 x the noise -> 1.5 x)
+    assert fit_scores(data, sims, "train")["worst_ratio"] == pytest.approx((3.0 + 0.0) / 2, abs=0.1)
 
 
 def test_compass_search_crosses_a_rough_cost():
