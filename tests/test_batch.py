@@ -166,7 +166,7 @@ def test_bad_sweep_file_is_one_line_exit_2_before_anything_runs(tmp_path, capsys
 # ----------------------------------------------------------------------------- no lost work
 
 N_RUNS = 30
-SLOW = LASER + "duration_s = 0.3\n[parameters]\npayload_kg = {low = 0.0, high = 1.6, n = 10}\n" \
+SLOW = LASER + "duration_s = 2.0\n[parameters]\npayload_kg = {low = 0.0, high = 1.6, n = 10}\n" \
                '"controller.kp" = [0.1, 0.127, 0.15]\n'
 
 
