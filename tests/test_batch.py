@@ -166,14 +166,16 @@ def test_bad_sweep_file_is_one_line_exit_2_before_anything_runs(tmp_path, capsys
 # ----------------------------------------------------------------------------- no lost work
 
 N_RUNS = 30
-SLOW = LASER + "duration_s = 2.0\n[parameters]\npayload_kg = {low = 0.0, high = 1.6, n = 10}\n" \
+SLOW = LASER + "duration_s = 0.3\n[parameters]\npayload_kg = {low = 0.0, high = 1.6, n = 10}\n" \
                '"controller.kp" = [0.1, 0.127, 0.15]\n'
 
 
 def start_sweep(tmp_path):
     path = sweep_file(tmp_path, SLOW)
     cmd = [sys.executable, "-m", "watflex_sim.cli", "batch", str(path), "--out", str(tmp_path / "out"), "--workers", "2"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Ctrl-C acts as in a terminal even when the tests run as a background job (which ignores SIGINT)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     return cmd, proc
 
 
