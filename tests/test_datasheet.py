@@ -7,7 +7,6 @@ import math
 import mujoco
 import numpy as np
 import pytest
-import scipy.linalg
 
 from watflex_sim import datasheet
 from watflex_sim.beam_theory import clamped_free_frequencies, tip_deflection
@@ -19,6 +18,15 @@ from watflex_sim.params import LASER_ARM, WATFLEX
 # = 11.2 N m^2, rho A = 2700 x 0.03 x 0.004 = 0.324 kg/m) with 0.2 kg at its tip, on a geared current drive.
 LINK = ('{ type = "flexible", name = "beam", length = "0.5 m", E = 70e9, width = 0.03, thickness = 0.004, '
         'mass_per_length = 0.324, tip_mass = 0.2 }')
+PID_LAW = """[controller]
+type = "pid"
+command = "current_cmd"
+position = "hub"
+reference = "hub_reference"
+kp = 5.0
+kd = 0.5
+rate_hz = 50.0
+"""  # the rig's law, and the law its recordings name
 RIG = """name = "labarm"
 description = "a one-link flexible arm described by its datasheet only"
 sensors = "generic"
@@ -30,15 +38,7 @@ hub = {{ unit = "rad", kind = "measured", joint = "shoulder", step = 1e-4, noise
 link = {{ unit = "rad", kind = "measured", link = "beam", quantity = "deflection_angle", length = 0.5, noise = 1e-4 }}
 current_cmd = {{ unit = "A", kind = "command", actuator = "shoulder_motor", joint = "shoulder" }}
 
-[controller]
-type = "pid"
-command = "current_cmd"
-position = "hub"
-reference = "hub_reference"
-kp = 5.0
-kd = 0.5
-rate_hz = 50.0
-
+""" + PID_LAW + """
 [parameters]
 shoulder_damping = {{ knob = "damping", target = "shoulder", tolerance = 0.25 }}
 
@@ -64,15 +64,7 @@ experiment = "labarm_moves"
 duration_s = 2.5
 reference = { channel = "hub_reference", kind = "triangle", amplitude = 0.5, slope = 1.0, periods = 1 }
 effects = [{ effect = "coulomb_friction", where = "shoulder", torque_positive = 0.5, torque_negative = 0.5 }]
-[controller]
-type = "pid"
-command = "current_cmd"
-position = "hub"
-reference = "hub_reference"
-kp = 5.0
-kd = 0.5
-rate_hz = 50.0
-"""
+""" + PID_LAW
 
 
 def stage_datasheet(link: str, drive: str = '{ type = "current", torque_constant = 0.1 }', extra: str = "",
@@ -85,14 +77,8 @@ def stage_datasheet(link: str, drive: str = '{ type = "current", torque_constant
 
 
 def clamped_chain_modes(model: mujoco.MjModel, prefix: str, n_modes: int = 3) -> np.ndarray:
-    """Frequencies (rad/s) of the chain `{prefix}_jNN`, every other dof held (a clamped root): K v = w^2 M v."""
-    dofs = [model.jnt_dofadr[j] for j in range(model.njnt) if model.joint(j).name.startswith(f"{prefix}_j")]
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, mass)
-    stiffness = np.diag(model.jnt_stiffness[model.dof_jntid[dofs]])
-    return np.sqrt(scipy.linalg.eigh(stiffness, mass[np.ix_(dofs, dofs)], eigvals_only=True)[:n_modes])
+    """Frequencies (rad/s) of the chain `{prefix}_jNN`, every other dof held (a clamped root)."""
+    return datasheet.chain_frequencies(model, datasheet.chain_dofs(model, prefix), n_modes)
 
 
 def hub_inertia(model: mujoco.MjModel) -> float:

@@ -10,10 +10,10 @@ import json
 import mujoco
 import numpy as np
 import pytest
-import scipy.linalg
 
 from watflex_sim import engine, load_scenario, simulate
 from watflex_sim.beam_theory import clamped_free_frequencies, clamped_tip_body_frequencies
+from watflex_sim.datasheet import chain_dofs, chain_frequencies
 from watflex_sim.engine import ControlLoop
 from watflex_sim.metrics import nrmse
 from watflex_sim.model import load_model
@@ -25,23 +25,6 @@ from watflex_sim.rigs import WatflexRig
 SHOULDER = {"shoulder": 0.0}
 CLAMPED = {"shoulder": 0.0, "elbow": 0.0}
 LINK1_STRAINS = ("strain_1A", "strain_1B", "strain_1C")
-
-
-def chain_dofs(model, prefix: str) -> np.ndarray:
-    """Dof indices of the hinges `{prefix}_jNN` (a flexible chain), root to tip."""
-    return np.array([model.jnt_dofadr[j] for j in range(model.njnt) if model.joint(j).name.startswith(f"{prefix}_j")],
-                    dtype=int)
-
-
-def modes(model, dofs: np.ndarray, n: int = 3) -> np.ndarray:
-    """First `n` natural frequencies (rad/s) of K v = w^2 M v over `dofs` at the straight pose
-    (K = diag(hinge stiffness), M = mj_fullM restricted to `dofs`: the other dofs held)."""
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    mass = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, mass)
-    stiffness = np.diag(model.jnt_stiffness[model.dof_jntid[dofs]])
-    return np.sqrt(scipy.linalg.eigh(stiffness, mass[np.ix_(dofs, dofs)], eigvals_only=True)[:n])
 
 
 # --- (a) elbow clamped: link 2's modes with the end effector ----------------------------------
@@ -60,7 +43,7 @@ def test_clamped_link2_modes_match_beam_with_offset_end_effector():
     assert sorted(model.joint(j).name for j in range(model.njnt)) == sorted(
         [f"link2_j{i:02d}" for i in range(1, WATFLEX.n_segments + 1)] + ["end_effector_float"])
     expected = clamped_tip_body_frequencies(WATFLEX.link2, WATFLEX.end_effector_mass, WATFLEX.l2c, 3)
-    np.testing.assert_allclose(modes(model, chain_dofs(model, "link2")), expected, rtol=0.01)
+    np.testing.assert_allclose(chain_frequencies(model, chain_dofs(model, "link2")), expected, rtol=0.01)
     assert expected[0] == pytest.approx(7.344, rel=1e-3)
 
 
@@ -196,8 +179,8 @@ def test_shoulder_lock_is_not_the_hinge_lock_with_link1_flexible():
     assert {"elbow_float", "link1_j01"} <= {flexible.joint(j).name for j in range(flexible.njnt)}
     expected = clamped_tip_body_frequencies(WATFLEX.link2, WATFLEX.end_effector_mass, WATFLEX.l2c, 1)[0]
     both = np.concatenate([chain_dofs(flexible, "link1"), chain_dofs(flexible, "link2")])
-    assert modes(rigid, chain_dofs(rigid, "link2"), 1)[0] == pytest.approx(expected, rel=0.01)
-    assert modes(flexible, both, 1)[0] < 0.5 * expected  # measured 3.41 rad/s
+    assert chain_frequencies(rigid, chain_dofs(rigid, "link2"), 1)[0] == pytest.approx(expected, rel=0.01)
+    assert chain_frequencies(flexible, both, 1)[0] < 0.5 * expected  # measured 3.41 rad/s
 
 
 def test_elbow_step_strains_are_1_7_times_the_old_set_up(monkeypatch):

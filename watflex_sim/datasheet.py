@@ -270,12 +270,24 @@ def clamped_modes(b: Beam, n_segments: int, tip_mass: float, n_modes: int = 3) -
         g = last.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[1e-4, 0, 0], pos=[chain_tip_x(b, n_segments), 0, 0])
         g.mass = tip_mass
     model = spec.compile()
+    return chain_frequencies(model, np.arange(model.nv), n_modes)
+
+
+def chain_dofs(model: mujoco.MjModel, prefix: str) -> np.ndarray:
+    """Dof indices of the hinges `{prefix}_jNN` of an RFE chain (build.add_flexible_chain), root to tip."""
+    return np.array([model.jnt_dofadr[j] for j in range(model.njnt) if model.joint(j).name.startswith(f"{prefix}_j")],
+                    dtype=int)
+
+
+def chain_frequencies(model: mujoco.MjModel, dofs: np.ndarray, n_modes: int = 3) -> np.ndarray:
+    """First `n_modes` natural frequencies (rad/s) of K v = w^2 M v over `dofs` at the model's reference
+    pose (K = diag(hinge stiffness), M = mj_fullM restricted to `dofs`: every other dof held)."""
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     mass = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, mass)
-    w2 = scipy.linalg.eigh(np.diag(model.jnt_stiffness), mass, eigvals_only=True)
-    return np.sqrt(w2[:n_modes])
+    stiffness = np.diag(model.jnt_stiffness[model.dof_jntid[dofs]])
+    return np.sqrt(scipy.linalg.eigh(stiffness, mass[np.ix_(dofs, dofs)], eigvals_only=True)[:n_modes])
 
 
 @cache
