@@ -236,8 +236,9 @@ class ControlLoop:
     def __init__(self, scenario: dict, parameter_names: dict[str, tuple[str, str]] | None = None):
         self.scenario = scenario
         rig_name = scenario["rig"]
+        description = load_rig(rig_name)
         self.patch = patch = Patch()
-        names = parameter_names if parameter_names is not None else load_rig(rig_name).parameter_knobs()
+        names = parameter_names if parameter_names is not None else description.parameter_knobs()
         apply_parameters(patch, scenario["parameters"], names)
         apply_effects(patch, scenario["effects"])
         self.model = load_model(
@@ -254,9 +255,9 @@ class ControlLoop:
         for edit in patch.model_edits:
             edit(self.model)
         # s: the scenario's (a recording's sidecar) sample period, else the rig's
-        self.period = period = scenario.get("control_period_s") or load_rig(rig_name).control_period_s
+        self.period = period = scenario.get("control_period_s") or description.control_period_s
         self.n_sub = substeps(period, self.model.opt.timestep)
-        self.jitter = load_rig(rig_name).control_jitter_s  # s
+        self.jitter = description.control_jitter_s  # s
         self.data = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
@@ -294,7 +295,7 @@ class ControlLoop:
         self._actuators = {c: (a, self.rig.command_scale.get(c, 1.0))
                            for c, a in self.rig.command_actuators.items() if c in patch.actuator}
         self.delays = _output_delays(self.jitter, self.model.opt.timestep, self.n_sub, self.n_ticks, scenario["seed"],
-                                     load_rig(rig_name).source)
+                                     description.source)
         self._applied, self._due = self.data.ctrl.copy(), 0  # the plant input held, substep the new one is due
 
     def __enter__(self) -> "ControlLoop":

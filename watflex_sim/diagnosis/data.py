@@ -191,17 +191,20 @@ def noise_ratio(data: Data, sims: list[Recording] | None, part: str = "all") -> 
     (1 = the model is as close as the noise allows); inf if the model diverged."""
     if sims is None:
         return math.inf
-    ratios = [r["ratio"] for r in channel_ratios(data, sims, part)]
-    return float(np.mean(ratios)) if ratios else 0.0
+    return _mean_ratio(channel_ratios(data, sims, part))
 
 
-def worst_channel(data: Data, sims: list[Recording], part: str = "all") -> tuple[str, float]:
-    """The channel furthest above its noise on a part, and its ratio: the median over recordings of
-    RMS residual / noise. A mean over channels hides one channel left unexplained (a motor current
-    1.5x its noise in every recording); the median over recordings does not count one recording where
-    a stick-slipping joint stopped elsewhere (a clean Watflex case: 2.8x in one step, 0.6-0.9x in two)."""
+def _mean_ratio(ratios: list[dict]) -> float:
+    return float(np.mean([r["ratio"] for r in ratios])) if ratios else 0.0
+
+
+def worst_channel(ratios: list[dict]) -> tuple[str, float]:
+    """The channel furthest above its noise, and its ratio, from `channel_ratios`: the median over
+    recordings of RMS residual / noise. A mean over channels hides one channel left unexplained (a motor
+    current 1.5x its noise in every recording); the median over recordings does not count one recording
+    where a stick-slipping joint stopped elsewhere (a clean Watflex case: 2.8x in one step, 0.6-0.9x in two)."""
     per: dict[str, list[float]] = {}
-    for r in channel_ratios(data, sims, part):
+    for r in ratios:
         per.setdefault(r["channel"], []).append(r["ratio"])
     typical = {c: float(np.median(v)) for c, v in per.items()}
     return max(typical.items(), key=lambda cv: cv[1], default=("", 0.0))
@@ -220,9 +223,10 @@ def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> d
         for c in chans:
             errors.append(nrmse(rec.channels[c][mask], sim.channels[c][mask]))
             corrs.append(correlation(rec.channels[c][mask], sim.channels[c][mask]))
-    worst, ratio = worst_channel(data, sims, part)
+    ratios = channel_ratios(data, sims, part)
+    worst, ratio = worst_channel(ratios)
     return {"nrmse": float(np.nanmean(errors)), "correlation": float(np.nanmean(corrs)),
-            "noise_ratio": noise_ratio(data, sims, part), "worst_channel": worst, "worst_ratio": ratio}
+            "noise_ratio": _mean_ratio(ratios), "worst_channel": worst, "worst_ratio": ratio}
 
 
 def noise_nrmse(data: Data, part: str = "all") -> float:

@@ -60,6 +60,18 @@ def unpack(x, free: list[Slot], base: Model) -> Model:
     return model
 
 
+def at_internal(u, free: list[Slot], base: Model) -> Model:
+    """Internal values (log where the slot is) of the free slots -> Model."""
+    return unpack([s.to_value(x) for s, x in zip(free, u)], free, base)
+
+
+def internal_start(free: list[Slot], x0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u, low, high) in internal units: the start x0 (physical units) clipped into the slots' bounds."""
+    lo = np.array([s.to_internal(s.low) for s in free])
+    hi = np.array([s.to_internal(s.high) for s in free])
+    return np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi), lo, hi
+
+
 def value_of(model: Model, slot: Slot) -> float:
     if slot.where[0] == "param":
         return model.parameters.get(slot.where[1], 1.0)
@@ -91,7 +103,7 @@ def jacobian(evaluate, base: Model, free: list[Slot], u: np.ndarray, r: np.ndarr
         steps[i] = _fd_step(free[i], u[i])
         v = np.array(u, float)
         v[i] += steps[i]
-        models.append(unpack([s.to_value(x) for s, x in zip(free, v)], free, base))
+        models.append(at_internal(v, free, base))
     for i, rv in zip(todo, evaluate(models)):
         known[i] = np.zeros_like(r) if rv is None else (rv - r) / steps[i]
     return np.column_stack([known[i] for i in range(len(free))]) if free else np.zeros((r.size, 0))
@@ -123,10 +135,8 @@ def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None 
     finite differences once, then kept current by Broyden updates, so each iteration costs one
     simulation of the training data; it stops when a step gains less than 0.1 %. Returns (model, Huber
     cost, J)."""
-    lo = np.array([s.to_internal(s.low) for s in free])
-    hi = np.array([s.to_internal(s.high) for s in free])
-    u = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi)
-    model = unpack([s.to_value(x) for s, x in zip(free, u)], free, base)
+    u, lo, hi = internal_start(free, x0)
+    model = at_internal(u, free, base)
     r = r0 if r0 is not None else evaluate([model])[0]
     if r is None:
         raise SimulationError("the starting model diverges")
@@ -144,7 +154,7 @@ def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None 
         step = z * span
         if np.max(np.abs(z)) < 1e-5:
             break
-        trial = unpack([s.to_value(x) for s, x in zip(free, u + step)], free, base)
+        trial = at_internal(u + step, free, base)
         r_new = evaluate([trial])[0]
         if r_new is None:
             lam *= 10
@@ -169,9 +179,7 @@ def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps:
     moves to the best if it lowers Huber's cost; a sweep that finds nothing halves the steps, which
     start at `first_step` x each slot's span. Levenberg-Marquardt's local model can stall there (a
     few 0.1 % of inertia decide where a stick-slipping joint stops)."""
-    lo = np.array([s.to_internal(s.low) for s in free])
-    hi = np.array([s.to_internal(s.high) for s in free])
-    u = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi)
+    u, lo, hi = internal_start(free, x0)
     k = huber_threshold(r0)
     cost, step = huber_cost(r0, k), first_step * (hi - lo)
     for _ in range(sweeps):
@@ -183,13 +191,13 @@ def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps:
                 if v[i] != u[i]:
                     trials.append(v)
         costs = [math.inf if r is None else huber_cost(r, k)
-                 for r in evaluate([unpack([s.to_value(x) for s, x in zip(free, v)], free, base) for v in trials])]
+                 for r in evaluate([at_internal(v, free, base) for v in trials])]
         best = int(np.argmin(costs)) if costs else -1
         if best >= 0 and costs[best] < cost * (1 - 1e-3):
             u, cost = trials[best], costs[best]
         else:
             step = step / 2
-    return unpack([s.to_value(x) for s, x in zip(free, u)], free, base)
+    return at_internal(u, free, base)
 
 
 def refit_parameters(data: Data, base: Model, runner=None, J: np.ndarray | None = None, iters: int = 4) -> Model:

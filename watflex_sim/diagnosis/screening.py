@@ -19,7 +19,7 @@ from scipy.optimize import lsq_linear
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, STRIDE, fit_scores, scale_of
-from .fitting import Slot, jacobian, levenberg, rig_slots, unpack, value_of
+from .fitting import Slot, at_internal, internal_start, jacobian, levenberg, rig_slots, value_of
 from .runner import evaluator, held, simulate_all
 
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
@@ -287,9 +287,8 @@ def fit_candidate(args) -> dict:
     x0 = [values[n] for n in fitted_names] + [value_of(base, s) for s in earlier + rig_slots(data)]
     failed = {"effect": cand.effect, "where": cand.where}
     try:
-        lo = np.array([s.to_internal(s.low) for s in free])
-        u0 = np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, [s.to_internal(s.high) for s in free])
-        r = evaluate([unpack([s.to_value(x) for s, x in zip(free, u0)], free, trial)])[0]
+        u0 = internal_start(free, x0)[0]
+        r = evaluate([at_internal(u0, free, trial)])[0]
         if r is None:
             return {**failed, "error": "diverges at its starting values"}
         known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
