@@ -10,7 +10,7 @@ import pytest
 
 from watflex_sim import load_scenario, simulate
 from watflex_sim.cli import EXIT_BAD_INPUT, main
-from watflex_sim.model import ROOT
+from watflex_sim.model import ROOT, ConfigError
 from watflex_sim.recording import read_recording
 from watflex_sim.rigdesc import known_rigs, load_rig
 
@@ -130,3 +130,30 @@ def test_a_rig_loaded_by_path_resolves_by_name_in_a_fresh_process(rigdir):
                            capture_output=True, text=True, timeout=120)
     assert child.returncode == 0, child.stderr
     assert child.stdout.strip() == source == str(rigdir / "rig.toml")
+
+
+def test_the_simulation_path_receives_the_rig(rigdir, monkeypatch):
+    """A rig is loaded once into one object (issue 15, item 1): given it, the engine, the lockstep
+    driver and re-simulation set up and run without resolving any rig by name (a lookup here fails)."""
+    import watflex_sim.rigdesc as rigdesc
+    from watflex_sim.resim import resimulate, resimulate_many
+
+    rig = rigdesc.use_rig(str(rigdir))  # as --rig PATH: the scenario's "myrig" resolves to it
+    path = rigdir.parent / "moves.toml"
+    path.write_text(SCENARIO.format(effects=FRICTION))
+    scenario = load_scenario(path)
+    scenario["duration_s"] = 0.2
+    rec = simulate(scenario, rig=rig).recording
+    with pytest.raises(ConfigError, match="scenario of rig 'myrig' given the rig 'emps'"):
+        simulate(scenario, rig=load_rig("emps"))
+
+    def no_lookup(*args):
+        raise AssertionError(f"rig looked up by name: {args}")
+
+    monkeypatch.setattr(rigdesc, "_load", no_lookup)
+    monkeypatch.setattr(rigdesc, "rig_file", no_lookup)
+    again = simulate(scenario, rig=rig).recording
+    assert all(np.array_equal(again.channels[c], rec.channels[c]) for c in rec.channels)
+    assert set(resimulate(rec, rig=rig).channels) == set(rec.channels)
+    sims = resimulate_many([(rec, [], {}, None, None), (rec, [], {}, 0.1, 3)], nthread=1, rig=rig)
+    assert [set(s.channels) for s in sims] == [set(rec.channels)] * 2

@@ -218,18 +218,13 @@ def load_sweep(path) -> Sweep:
             except ConfigError as exc:
                 raise ConfigError(f"run {i} ({', '.join(f'{k}={v!r}' for k, v in values.items())}): {exc}") from None
         first = check(resolve(sweep, next(points(sweep))))
-        ControlLoop(first, _knobs(first["rig"]))  # set up, not run: controller, joints, effects, knobs
+        ControlLoop(first)  # set up, not run: controller, joints, effects, the rig's refit parameters
         return sweep
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
 
 
 # ----------------------------------------------------------------------------- one run
-
-
-def _knobs(rig: str) -> dict[str, tuple[str, str]]:
-    """The rig description's refit parameter names (scenario key `parameters`), as the diagnosis uses them."""
-    return load_rig(rig).parameter_knobs()
 
 
 @functools.lru_cache(maxsize=8)
@@ -301,7 +296,7 @@ def run_one(task: dict) -> dict:
     is a row with status 'diverged' or 'error' and the message, never an exception."""
     start, row = time.perf_counter(), _row(task, "ok")
     try:
-        result = simulate(check(task["scenario"]), parameter_names=_knobs(task["scenario"]["rig"]))
+        result = simulate(check(task["scenario"]))
         row |= run_metrics(result.recording, task["scenario"])
         if task.get("keep"):
             write_recording(result.recording, task["keep"], task["run_id"])
@@ -323,7 +318,7 @@ def run_many(tasks: list[dict], nthread: int = 1) -> list[dict]:
     for rig, ks in by_rig.items():
         start = time.perf_counter()
         try:
-            results = simulate_batch([check(tasks[k]["scenario"]) for k in ks], _knobs(rig), nthread)
+            results = simulate_batch([check(tasks[k]["scenario"]) for k in ks], nthread=nthread, rig=load_rig(rig))
         except Exception:  # noqa: BLE001 - found again, per run, by run_one
             for k in ks:
                 rows[k] = run_one(tasks[k])

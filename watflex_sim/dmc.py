@@ -19,9 +19,10 @@ from dm_control.suite import base
 from dm_control.utils import rewards
 from dm_env import specs
 
-from .engine import RIG_CLASSES, _settle_bearings
+from .engine import _settle_bearings
 from .model import ConfigError, load_model, rig_params
 from .params import CONTROL_PERIOD
+from .rigdesc import load_rig
 from .scenario import load_scenario
 
 _SCENARIO = {"laser_arm": "laser_arm_step", "watflex": "watflex_elbow_step"}
@@ -84,7 +85,8 @@ class StepTask(base.Task):
                  noise: bool = True, random=None):
         """amplitude (rad) applies from step_time_s (s); `random`: seed or RandomState for the noise."""
         super().__init__(random=random)
-        self.rig_name, self.params = rig, rig_params(rig)
+        self.rig_name, self.description = rig, load_rig(rig)
+        self.params = self.description.params
         self.amplitude, self.step_time_s = float(amplitude), float(step_time_s)
         self.locked = dict(locked_joints or {})
         self.noise = bool(noise)
@@ -96,8 +98,8 @@ class StepTask(base.Task):
         self._age = 0.0  # s since it
 
     def _make_rig(self, physics, seed: int, noise: bool):
-        kwargs = {"locked": self.locked} if self.rig_name == "watflex" else {}
-        return RIG_CLASSES[self.rig_name](physics.model.ptr, physics.data.ptr, self.params, noise, seed, **kwargs)
+        return self.description.make_sensors(physics.model.ptr, physics.data.ptr, {"noise": noise, "seed": seed,
+                                             "n_segments": 0, "locked_joints": self.locked}, CONTROL_PERIOD)
 
     def reference(self, t: float) -> float:
         """Reference (rad) at time t (s), evaluated on the 1 ms control grid."""

@@ -15,31 +15,13 @@ import numpy as np
 from . import __version__
 from .effects import Patch, apply_effects, apply_parameters
 from .joint_friction import FrictionCallback, configure, nominal_frictions, patched
-from .model import ConfigError, load_model, rig_params, segmented
+from .model import ConfigError, load_model
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
-from .rigdesc import load_rig
-from .rigs import GenericRig, LaserArmRig, WatflexRig
+from .rigdesc import RigDescription, load_rig
 from .signals import make_signal
 
 log = logging.getLogger(__name__)
-
-RIG_CLASSES = {"laser_arm": LaserArmRig, "watflex": WatflexRig}  # sensor implementations by name
-
-
-def make_rig(scenario: dict, model: mujoco.MjModel, data: mujoco.MjData):
-    """The rig's sensors and actuators, as its description (rigs/<rig>.toml) names them."""
-    rig_name = scenario["rig"]
-    description = load_rig(rig_name)
-    period = scenario.get("control_period_s") or description.control_period_s
-    if description.sensors == "generic":
-        return GenericRig(model, data, description, scenario["noise"], scenario["seed"], period)
-    if period != CONTROL_PERIOD:
-        raise ConfigError(f"rig {rig_name!r} runs at {CONTROL_PERIOD * 1e3:g} ms only (its sensors are not generic)")
-    kwargs = {"locked": scenario["locked_joints"]} if description.sensors == "watflex" else {}
-    params = segmented(rig_name, scenario["n_segments"])
-    return RIG_CLASSES[description.sensors](model, data, params, scenario["noise"], scenario["seed"], **kwargs)
-
 
 class SimulationError(RuntimeError):
     """MuJoCo warned or the state diverged; the message names the time and the cause."""
@@ -63,10 +45,9 @@ def substeps(control_period: float, timestep: float) -> int:
     return n
 
 
-def make_controller(scenario: dict, rig_name: str, period: float = CONTROL_PERIOD):
-    """The scenario's controller: a registered closed-loop type, or open loop from its command signals.
-
-    A controller that takes a `period` and is not given one runs at the rig's (s)."""
+def make_controller(scenario: dict, rig: RigDescription, period: float = CONTROL_PERIOD):
+    """The scenario's controller on `rig`: a registered closed-loop type, or open loop from its command
+    signals. A controller that takes a `period` and is not given one runs at the rig's (s)."""
     from .controllers import CONTROLLERS, OpenLoop  # controllers import watflex_sim.params: import late
 
     spec = dict(scenario["controller"])
@@ -84,13 +65,13 @@ def make_controller(scenario: dict, rig_name: str, period: float = CONTROL_PERIO
         if compensation is not None:  # [controller.compensation]: friction compensation around it
             from .controllers.friction_compensation import wrap_compensation
 
-            controller = wrap_compensation(controller, compensation, rig_params(rig_name))
+            controller = wrap_compensation(controller, compensation, rig.params)
         return controller
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"controller {kind!r}: {exc}") from None
 
 
-def _references(scenario: dict, rig_name: str) -> dict[str, Callable[[float], float]]:
+def _references(scenario: dict, rig: RigDescription) -> dict[str, Callable[[float], float]]:
     """Reference signals by channel (rad); a laser-arm 'arc_m' step is converted by the beam length."""
     sign = 1.0 if scenario["direction"] == "positive" else -1.0
     out = {}
@@ -98,7 +79,7 @@ def _references(scenario: dict, rig_name: str) -> dict[str, Callable[[float], fl
         table = dict(table)
         scale = 1.0
         if "arc_m" in table:  # laser spot displacement along the tip's arc (m) -> rad
-            table["amplitude"], scale = table.pop("arc_m"), 1.0 / rig_params(rig_name).beam.length
+            table["amplitude"], scale = table.pop("arc_m"), 1.0 / rig.params.beam.length
         out[table["channel"]] = make_signal(table, sign, scale)
     return out
 
@@ -233,16 +214,20 @@ class ControlLoop:
     Raises ConfigError for an impossible configuration.
     """
 
-    def __init__(self, scenario: dict, parameter_names: dict[str, tuple[str, str]] | None = None):
+    def __init__(self, scenario: dict, parameter_names: dict[str, tuple[str, str]] | None = None,
+                 rig: RigDescription | None = None):
+        """`rig`: the scenario's rig, loaded (rigdesc.load_rig); loaded here by its name if not given."""
         self.scenario = scenario
         rig_name = scenario["rig"]
-        description = load_rig(rig_name)
+        self.description = description = rig if rig is not None else load_rig(rig_name)
+        if description.name != rig_name:
+            raise ConfigError(f"scenario of rig {rig_name!r} given the rig {description.name!r} ({description.source})")
         self.patch = patch = Patch()
         names = parameter_names if parameter_names is not None else description.parameter_knobs()
         apply_parameters(patch, scenario["parameters"], names)
         apply_effects(patch, scenario["effects"])
         self.model = load_model(
-            rig_name,
+            description,
             payload_kg=scenario["payload_kg"] + patch.payload_kg,
             locked_joints=scenario["locked_joints"],
             tilt_rad=scenario["tilt_rad"] + patch.tilt_rad,
@@ -262,23 +247,23 @@ class ControlLoop:
         mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
-        self.rig = make_rig(scenario, self.model, self.data)
+        self.rig = description.make_sensors(self.model, self.data, scenario, period)
         if scenario.get("initial"):  # start where a recording starts (generic rigs)
             if not hasattr(self.rig, "start_at"):
                 raise ConfigError(f"rig {rig_name!r} cannot start from recorded values (its sensors are not generic)")
             self.rig.start_at(scenario["initial"])
-        frictions = nominal_frictions(rig_name) if scenario["friction"] == "nominal" else {}
+        frictions = nominal_frictions(description) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(configure(frictions, scenario["joint_friction"]), patch.friction, patch.friction_add)
         self.friction = FrictionCallback(self.model, self.data, frictions)
-        self.controller = make_controller(scenario, rig_name, period)
+        self.controller = make_controller(scenario, description, period)
         reads = getattr(self.controller, "channels", None)  # a law on named channels says which it reads
         unknown = sorted(set(reads()) - set(self.rig.channels)) if callable(reads) else []
         if unknown:
             raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
-        references = _references(scenario, rig_name)
+        references = _references(scenario, description)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
             raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
@@ -286,7 +271,7 @@ class ControlLoop:
         # references depend on t only: tabulate them once for every tick
         times = [k * period for k in range(self.n_ticks)]
         self.references = _References({c: np.array([f(t) for t in times]) for c, f in references.items()}, self.n_ticks)
-        self.n_segments = getattr(segmented(rig_name, scenario["n_segments"]), "n_segments", 0)
+        self.n_segments = getattr(description.segmented(scenario["n_segments"]), "n_segments", 0)
         self.monitor = GrowthMonitor(self.model, self.n_segments)
         ticks = CONTROL_PERIOD / period  # delays are counted in CONTROL_PERIOD ticks (effects.delay): in ours
         self._commands = [{}] * round(patch.command_delay * ticks)  # FIFO of commands waiting for the plant
@@ -378,13 +363,14 @@ def _output_delays(jitter: float, timestep: float, n_sub: int, n_ticks: int, see
 
 
 def simulate(scenario: dict, progress: Callable[[float], None] | None = None,
-             parameter_names: dict[str, tuple[str, str]] | None = None) -> SimResult:
-    """Run a checked scenario (scenario.load_scenario) and return its recording and drawings.
+             parameter_names: dict[str, tuple[str, str]] | None = None, rig: RigDescription | None = None) -> SimResult:
+    """Run a checked scenario (scenario.load_scenario) and return its recording and drawings;
+    `rig`: its rig, loaded (else loaded by the scenario's name).
 
     Raises ConfigError for an impossible configuration and SimulationError on divergence.
     `progress(fraction)` is called about every simulated 0.1 s.
     """
-    return run(ControlLoop(scenario, parameter_names), progress)
+    return run(ControlLoop(scenario, parameter_names, rig), progress)
 
 
 def run(loop: ControlLoop, progress: Callable[[float], None] | None = None) -> SimResult:

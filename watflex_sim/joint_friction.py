@@ -51,13 +51,14 @@ class JointFriction:
         return (p.alpha0 + p.alpha1) * (1.0 + self.dwell_gain * (1.0 - math.exp(-rest_time / self.dwell_time)))
 
 
-def nominal_frictions(rig: str) -> dict[str, JointFriction]:
-    """The nominal model's joint friction (rigs.md): Watflex shoulder and elbow; none on the laser arm."""
-    from .params import WATFLEX
+def nominal_frictions(rig) -> dict[str, JointFriction]:
+    """The nominal model's joint friction (rigs.md) of `rig` (a name or a loaded rigdesc.RigDescription):
+    its parameter set's `<joint>_friction` laws (Watflex shoulder and elbow); none on other rigs."""
+    from .rigdesc import load_rig
 
-    if rig != "watflex":
-        return {}
-    return {"shoulder": JointFriction(*WATFLEX.shoulder_friction), "elbow": JointFriction(*WATFLEX.elbow_friction)}
+    params = (load_rig(rig) if isinstance(rig, str) else rig).params
+    return {joint: JointFriction(*getattr(params, f"{joint}_friction"))
+            for joint in ("shoulder", "elbow") if hasattr(params, f"{joint}_friction")}
 
 
 def configure(base: dict[str, JointFriction], overrides: dict) -> dict[str, JointFriction]:

@@ -20,6 +20,7 @@ from mujoco import batch as mjbatch
 
 from .engine import CHECK_EVERY, MAX_QVEL, ControlLoop, SimResult, SimulationError, Tape, run
 from .joint_friction import BatchFriction
+from .rigdesc import RigDescription
 
 log = logging.getLogger(__name__)
 
@@ -43,14 +44,15 @@ def structure(model: mujoco.MjModel) -> tuple:
 
 
 def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
-                   nthread: int = 0) -> list[SimResult | SimulationError]:
-    """Run checked scenarios (scenario.load_scenario) of one or more rigs in lockstep; nthread 0: all CPUs.
+                   nthread: int = 0, rig: RigDescription | None = None) -> list[SimResult | SimulationError]:
+    """Run checked scenarios (scenario.load_scenario) of one or more rigs in lockstep; nthread 0: all CPUs;
+    `rig`: the scenarios' rig, loaded (else each is loaded by its scenario's name).
 
     Returns per scenario its SimResult (recording identical to `engine.simulate`'s, see
     tests/test_lockstep.py) or the SimulationError that stopped it (the others go on).
     Raises ConfigError for an impossible configuration, before anything runs.
     """
-    loops = [ControlLoop(s, parameter_names) for s in scenarios]
+    loops = [ControlLoop(s, parameter_names, rig) for s in scenarios]
     groups: dict[tuple, list[int]] = {}
     for i, loop in enumerate(loops):
         groups.setdefault((structure(loop.model), loop.n_sub), []).append(i)

@@ -1,7 +1,6 @@
 """Load a rig's nominal model (the MJCF file its description names) with a scenario's payload, locks and tilt."""
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 from typing import Callable, Sequence
@@ -9,7 +8,7 @@ from typing import Callable, Sequence
 import mujoco
 
 from .build import BUILDERS, make_single_link
-from .params import GRAVITY, RIGS
+from .params import GRAVITY
 
 _PACKAGE = Path(__file__).resolve().parent
 # The folder holding models/, rigs/, scenarios/, sweeps/: watflex_sim/data/ when installed from a
@@ -36,35 +35,15 @@ def read_toml(path: Path, what: str) -> dict:
 
 
 def rig_params(rig: str):
-    """The parameter set of `rig` in params.py (laser_arm, watflex, emps); None for a rig described
-    by its file alone (rigdesc: its model is an MJCF file); ConfigError if the rig is unknown."""
-    if rig in RIGS:
-        return RIGS[rig]
+    """The parameter set (params.py) of rig `rig`'s generated model (laser_arm, watflex, emps); None for
+    a rig described by its file alone; ConfigError if the rig is unknown."""
     from .rigdesc import load_rig
 
-    load_rig(rig)
-    return None
-
-
-def segmented(rig: str, n_segments: int):
-    """The rig's parameters with `n_segments` segments per flexible part (0: unchanged)."""
-    params = rig_params(rig)
-    if not n_segments:
-        return params
-    if not isinstance(n_segments, int) or n_segments < 2 or not hasattr(params, "n_segments"):
-        raise ConfigError(f"n_segments must be an integer >= 2 on a rig with flexible parts, got {n_segments!r}")
-    return dataclasses.replace(params, n_segments=n_segments)
-
-
-def nominal_spec(rig: str) -> mujoco.MjSpec:
-    """The nominal model of `rig`: the MJCF file its description names (rigdesc), or the generator's."""
-    from .rigdesc import load_rig
-
-    return load_rig(rig).spec()
+    return load_rig(rig).params
 
 
 def load_model(
-    rig: str,
+    rig,
     payload_kg: float = 0.0,
     locked_joints: dict[str, float] | None = None,
     tilt_rad: float = 0.0,
@@ -75,7 +54,7 @@ def load_model(
     n_segments: int = 0,
     single_link: bool = True,
 ) -> mujoco.MjModel:
-    """Compile `rig` with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
+    """Compile `rig` (a name or a loaded rigdesc.RigDescription) with an extra tip mass (kg), joints locked at angles (rad) and a tilted table.
 
     A locked joint is removed and its body turned to the lock angle, so it is exactly rigid.
     Tilt turns gravity by `tilt_rad` towards the azimuth `tilt_azimuth_rad` (rad from +x).
@@ -89,10 +68,14 @@ def load_model(
     link 1 flexible under the elbow on its air bearing (a different rig, for model tests).
     Raises ConfigError for a negative payload, an unknown joint, a bad timestep or segment count.
     """
-    if n_segments and rig not in BUILDERS:
+    from .rigdesc import load_rig
+
+    description = load_rig(rig) if isinstance(rig, str) else rig
+    rig = description.name
+    if n_segments and description.model not in BUILDERS:
         raise ConfigError(f"n_segments: rig {rig!r} has no model generator (its model is an MJCF file)")
-    params = segmented(rig, n_segments)
-    spec = nominal_spec(rig) if not n_segments else BUILDERS[rig](params)
+    params = description.segmented(n_segments)
+    spec = description.spec() if not n_segments else BUILDERS[description.model](params)
     for edit in edits:
         edit(spec)
     if actuator_bench:

@@ -11,7 +11,6 @@ import numpy as np
 
 from .effects import Patch, apply_effects, apply_parameters
 from .interrupts import staged
-from .model import nominal_spec
 from .plot import plot_recording
 from .recording import Recording
 from .rigdesc import load_rig
@@ -22,7 +21,7 @@ MAX_PLOTS = 6  # recordings plotted (the first ones)
 def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
     """Refit parameters as ratio and, where the model holds it, value and unit (e.g. EMPS mass in kg)."""
     description = load_rig(rig)
-    spec = nominal_spec(rig)
+    spec = description.spec()
     model = spec.compile()
     out = {}
     for name, ratio in ratios.items():
@@ -43,9 +42,10 @@ def patched_spec(rig: str, patch_spec: dict) -> mujoco.MjSpec:
 
     Friction found on a joint is written as its frictionloss (the break-away level); laws, sensor
     and actuator changes live in patch.json, which `watflex-sim run --patch` applies."""
-    spec = nominal_spec(rig)
+    description = load_rig(rig)
+    spec = description.spec()
     patch = Patch()
-    apply_parameters(patch, patch_spec.get("parameters", {}), load_rig(rig).parameter_knobs())
+    apply_parameters(patch, patch_spec.get("parameters", {}), description.parameter_knobs())
     apply_effects(patch, patch_spec.get("effects", []))
     for edit in patch.spec_edits:
         edit(spec)

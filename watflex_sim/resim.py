@@ -9,22 +9,25 @@ from .engine import SimulationError, simulate
 from .lockstep import simulate_batch
 from .model import ConfigError
 from .recording import Recording
-from .rigdesc import load_rig
+from .rigdesc import RigDescription, load_rig
 from .scenario import DEFAULTS, check
 
 
-def scenario_from_recording(rec: Recording) -> dict:
-    """A scenario that repeats `rec`'s experiment: its references and disturbances replayed as
-    recorded; closed loop re-runs the sidecar's controller, open loop replays the commands.
+def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -> dict:
+    """A scenario that repeats `rec`'s experiment on `rig` (loaded; else by the recording's name): its
+    references and disturbances replayed as recorded; closed loop re-runs the sidecar's controller,
+    open loop replays the commands.
 
     Raises ConfigError when the recording cannot drive a simulation (no controller, no command).
     """
-    meta, description = rec.meta, load_rig(rec.rig)
+    meta, description = rec.meta, rig if rig is not None else load_rig(rec.rig)
+    if meta.get("rig") != description.name:
+        raise ConfigError(f"a recording of rig {meta.get('rig')!r} re-simulated on rig {description.name!r}")
     scenario = copy.deepcopy(DEFAULTS)
     time = rec.time - rec.time[0]
     period = float(meta.get("control_period_s") or description.control_period_s)  # s: the sidecar's, else the rig's
     scenario.update(
-        rig=rec.rig, experiment=meta.get("experiment", "recording"), name=meta.get("experiment", "recording"),
+        rig=description.name, experiment=meta.get("experiment", "recording"), name=meta.get("experiment", "recording"),
         duration_s=float(round(time[-1] / period) + 1) * period,
         payload_kg=float(meta.get("payload_kg", 0.0)), locked_joints=dict(meta.get("locked_joints", {})),
         noise=False, seed=0, control_period_s=period,
@@ -59,31 +62,34 @@ def _samples(channel: str, time: np.ndarray, values: np.ndarray) -> dict:
 
 
 def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None = None,
-               until: float | None = None, noise_seed: int | None = None) -> Recording:
+               until: float | None = None, noise_seed: int | None = None, rig: RigDescription | None = None) -> Recording:
     """Simulate `rec`'s experiment with `effects` and refit `parameters`; channels sampled at rec.time.
 
     With `until` (s from the start) the simulation stops there; later samples hold its last value.
-    With `noise_seed` the rig's measurement noise is on (fed back through the controller as on the rig)."""
-    scenario = _resim_scenario(rec, effects, parameters, until, noise_seed)
-    return _sampled(rec, simulate(scenario, parameter_names=load_rig(rec.rig).parameter_knobs()).recording)
+    With `noise_seed` the rig's measurement noise is on (fed back through the controller as on the rig).
+    `rig`: the recording's rig, loaded (else loaded by its name)."""
+    rig = rig if rig is not None else load_rig(rec.rig)
+    return _sampled(rec, simulate(_resim_scenario(rig, rec, effects, parameters, until, noise_seed), rig=rig).recording)
 
 
-def resimulate_many(jobs: list[tuple], nthread: int = 0) -> list[Recording | SimulationError]:
+def resimulate_many(jobs: list[tuple], nthread: int = 0, rig: RigDescription | None = None) -> list[Recording | SimulationError]:
     """`resimulate(*job)` for every job (rec, effects, parameters, until, noise_seed), stepped together
-    in lockstep (lockstep.simulate_batch, nthread 0: all CPUs); a diverged job gives its SimulationError."""
+    in lockstep (lockstep.simulate_batch, nthread 0: all CPUs); a diverged job gives its SimulationError.
+    `rig`: the recordings' rig, loaded (else each rig is loaded by its name)."""
     out: list = [None] * len(jobs)
     by_rig: dict[str, list[int]] = {}
     for k, job in enumerate(jobs):
-        by_rig.setdefault(job[0].rig, []).append(k)
-    for rig, ks in by_rig.items():
-        scenarios = [_resim_scenario(*jobs[k]) for k in ks]
-        for k, result in zip(ks, simulate_batch(scenarios, load_rig(rig).parameter_knobs(), nthread)):
+        by_rig.setdefault(job[0].meta.get("rig"), []).append(k)
+    for name, ks in by_rig.items():
+        description = rig if rig is not None and rig.name == name else load_rig(jobs[ks[0]][0].rig)
+        scenarios = [_resim_scenario(description, *jobs[k]) for k in ks]
+        for k, result in zip(ks, simulate_batch(scenarios, nthread=nthread, rig=description)):
             out[k] = result if isinstance(result, SimulationError) else _sampled(jobs[k][0], result.recording)
     return out
 
 
-def _resim_scenario(rec: Recording, effects=(), parameters=None, until=None, noise_seed=None) -> dict:
-    scenario = scenario_from_recording(rec)
+def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=None, until=None, noise_seed=None) -> dict:
+    scenario = scenario_from_recording(rec, rig)
     if noise_seed is not None:
         scenario.update(noise=True, seed=int(noise_seed))
     if until is not None:

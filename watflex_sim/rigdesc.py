@@ -17,6 +17,7 @@ processes (forked, spawned or a forkserver's) resolve names the same way.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import tomllib
 from collections.abc import Mapping
@@ -93,6 +94,38 @@ class RigDescription:
         if self.model.endswith(".xml") or "/" in self.model or os.sep in self.model:
             return Path(self.source).parent / self.model
         return ROOT / "models" / f"{self.model}.xml"
+
+    @property
+    def params(self):
+        """The parameter set (params.py) of a bundled generated model (laser_arm, watflex, emps), by the
+        model's name; None for a rig whose model is an MJCF file or its [datasheet]."""
+        from .params import RIGS
+
+        return RIGS.get(self.model)
+
+    def segmented(self, n_segments: int):
+        """`params` with `n_segments` segments per flexible part (0: unchanged); ConfigError if the rig
+        has no generated flexible parts or the count is not an integer >= 2."""
+        params = self.params
+        if not n_segments:
+            return params
+        if not isinstance(n_segments, int) or n_segments < 2 or not hasattr(params, "n_segments"):
+            raise ConfigError(f"n_segments must be an integer >= 2 on a rig with flexible parts, got {n_segments!r}")
+        return dataclasses.replace(params, n_segments=n_segments)
+
+    def make_sensors(self, model: mujoco.MjModel, data: mujoco.MjData, scenario: dict, period: float):
+        """The rig's sensors and actuators on (model, data) (rigs.py): the generic ones read the
+        channels' tables; the laser arm's and Watflex's are their own (1 ms only)."""
+        from .rigs import GenericRig, LaserArmRig, WatflexRig
+
+        if self.sensors == "generic":
+            return GenericRig(model, data, self, scenario["noise"], scenario["seed"], period)
+        if period != CONTROL_PERIOD:
+            raise ConfigError(f"rig {self.name!r} runs at {CONTROL_PERIOD * 1e3:g} ms only (its sensors are not generic)")
+        if self.sensors == "watflex":
+            return WatflexRig(model, data, self.segmented(scenario["n_segments"]), scenario["noise"], scenario["seed"],
+                              locked=scenario["locked_joints"])
+        return LaserArmRig(model, data, self.segmented(scenario["n_segments"]), scenario["noise"], scenario["seed"])
 
     def spec(self) -> mujoco.MjSpec:
         """The nominal model: generated from [datasheet] (model = "datasheet"), the MJCF file, or the

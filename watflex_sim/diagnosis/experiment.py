@@ -24,7 +24,7 @@ VARIANTS = {"x0.3": (0.3, 1.0), "x2": (2.0, 1.0), "mirrored": (-1.0, 1.0), "3x s
 def _variant(data: Data, i: int, scale: float, stretch: float) -> dict:
     """Recording i's experiment with its driving signals scaled about their first value and stretched in time."""
     rec = data.recordings[i]
-    scenario = scenario_from_recording(rec)
+    scenario = scenario_from_recording(rec, data.rig)
     drive = set(data.rig.of_kind("reference")) | (set(data.rig.of_kind("command")) if scenario.get("command") else set())
     for key in ("reference", "command"):
         for signal in scenario.get(key) or []:
@@ -43,7 +43,7 @@ def _simulate(job: tuple[dict, Model]) -> dict | None:
     scenario = copy.deepcopy(scenario)
     scenario["effects"], scenario["parameters"] = list(model.effects), dict(model.parameters)
     try:
-        rec = simulate(scenario, parameter_names=held().rig.parameter_knobs()).recording
+        rec = simulate(scenario, rig=held().rig).recording
     except SimulationError:
         return None
     return {"time": rec.time, **rec.channels}

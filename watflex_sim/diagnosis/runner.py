@@ -37,7 +37,7 @@ def simulate_all(data: Data, model: Model, part: str = "all") -> list[Recording]
     as the measurement itself, contributing nothing); None if a simulation diverged."""
     wanted = [i for i, t in enumerate(data.train) if in_part(t, part).any()]
     sims = resimulate_many([(data.recordings[i], model.effects, model.parameters,
-                             last_time(data.recordings[i], data.train[i], part)) for i in wanted], _threads())
+                             last_time(data.recordings[i], data.train[i], part)) for i in wanted], _threads(), data.rig)
     failed = next((s for s in sims if isinstance(s, SimulationError)), None)
     if failed is not None:
         log.info("model %s diverged: %s", model, failed)
@@ -77,7 +77,7 @@ def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
     todo = [k for k, (_m, i, part) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
     sims = resimulate_many([(_DATA.recordings[jobs[k][1]], jobs[k][0].effects, jobs[k][0].parameters,
                              last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]))
-                            for k in todo], nthread)
+                            for k in todo], nthread, _DATA.rig)
     out: list = [np.zeros(0)] * len(jobs)
     for k, sim in zip(todo, sims):
         _m, i, part = jobs[k]
@@ -91,7 +91,7 @@ def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
 
 def _simulate_some(jobs: list[tuple], nthread: int = 1) -> list[Recording | None]:
     """Recordings i re-simulated with their models, jobs (model, i, noise_seed), in lockstep."""
-    sims = resimulate_many([(_DATA.recordings[i], m.effects, m.parameters, None, seed) for m, i, seed in jobs], nthread)
+    sims = resimulate_many([(_DATA.recordings[i], m.effects, m.parameters, None, seed) for m, i, seed in jobs], nthread, _DATA.rig)
     return [None if isinstance(s, SimulationError) else s for s in sims]
 
 

@@ -140,9 +140,9 @@ def fed_back(data: Data) -> set[str]:
 
     channels = set()
     for rec in data.recordings:
-        scenario = scenario_from_recording(rec)
+        scenario = scenario_from_recording(rec, data.rig)
         scenario["duration_s"] = 0.002
-        loop = ControlLoop(scenario, data.rig.parameter_knobs())
+        loop = ControlLoop(scenario, rig=data.rig)
         with loop:
             obs = _Reads(loop.rig.observe(loop.references[0]))
             loop.controller(0.0, obs)
