@@ -320,9 +320,9 @@ def test_unreadable_sidecar_and_nul_in_path(tmp_path):
         read_recording(tmp_path / "a\0b.csv")
 
 
-def test_not_csv_or_mat(tmp_path):
-    path = put(tmp_path, GOOD_CSV, META, suffix=".txt")
-    with pytest.raises(RecordingError, match=r"r\.txt: not a \.csv or \.mat recording"):
+def test_not_a_recording_suffix(tmp_path):
+    path = put(tmp_path, GOOD_CSV, META, suffix=".xlsx")
+    with pytest.raises(RecordingError, match=r"r\.xlsx: not a recording \(\.csv, \.txt, \.tsv, \.dat text or \.mat\)"):
         read_recording(path)
 
 

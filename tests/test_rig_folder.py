@@ -100,6 +100,8 @@ BAD = {  # what is wrong -> (edit of rig.toml, words the one-line error must hol
                                         ["controller.position", "qx"]),
     "unknown joint": (lambda t: t.replace('joint = "carriage", noise', 'joint = "cart", noise'), ["qm", "cart"]),
     "bad TOML": (lambda t: t + "\n[channels\n", ["cannot read"]),
+    "unknown channel in columns": (lambda t: t + '\n[columns]\n"q (mm)" = { channel = "q", scale = 1e-3 }\n',
+                                   ["columns", "'q (mm)'", "'q'"]),
 }
 
 
@@ -157,3 +159,54 @@ def test_the_simulation_path_receives_the_rig(rigdir, monkeypatch):
     assert set(resimulate(rec, rig=rig).channels) == set(rec.channels)
     sims = resimulate_many([(rec, [], {}, None, None), (rec, [], {}, 0.1, 3)], nthread=1, rig=rig)
     assert [set(s.channels) for s in sims] == [set(rec.channels)] * 2
+
+
+COLUMNS = '''
+[columns]                 # the lab's own export: names, mm, ms
+"Time [ms]" = { channel = "time", scale = 0.001 }
+"q_ref (mm)" = { channel = "qg", scale = 0.001 }
+"q_m (mm)" = { channel = "qm", scale = 0.001 }
+"u (V)" = "vir"
+"T (C)" = ""              # a column the recording does not use
+t_ms = { channel = "time", scale = 0.001 }
+q_ref_mm = { channel = "qg", scale = 0.001 }
+q_m_mm = { channel = "qm", scale = 0.001 }
+u_V = "vir"
+'''
+
+
+def test_a_lab_text_export_is_read_through_the_rig_columns(tmp_path, monkeypatch):
+    """Recordings as users have them (issue 15, item 6): tab- or space-separated text with the lab's
+    column names, mm and ms, mapped by the rig's [columns]; read, they equal the contract CSV they
+    were written from (to the 10 digits written); a bad cell names the line and the file's column."""
+    from watflex_sim.recording import RecordingError, write_recording
+
+    monkeypatch.setenv("WATFLEX_RIGS", "")
+    folder = make_rig(tmp_path / "myrig", lambda t: t + COLUMNS)
+    (tmp_path / "moves.toml").write_text(SCENARIO.format(effects=""))
+    main(["run", str(tmp_path / "moves.toml"), "--rig", str(folder), "--out", str(tmp_path / "sim"), "--no-rrd"])
+    csv_path = next((tmp_path / "sim").glob("*.csv"))
+    rec = read_recording(csv_path)
+    rows = np.column_stack([rec.time * 1e3, rec.channels["qg"] * 1e3, rec.channels["qm"] * 1e3, rec.channels["vir"],
+                            np.full(rec.time.size, 21.5)])
+    exports = {
+        "tabs.tsv": "# exported by the lab PC\n" + "\t".join(["Time [ms]", "q_ref (mm)", "q_m (mm)", "u (V)", "T (C)"]) + "\n"
+                    + "".join("\t".join(format(x, ".10g") for x in row) + "\n" for row in rows),
+        "spaces.txt": "% t in ms\n" + "   t_ms   q_ref_mm   q_m_mm   u_V\n"
+                      + "".join("  ".join(format(x, ".10g") for x in row[:4]) + "\n" for row in rows),
+    }
+    for name, text in exports.items():
+        path = tmp_path / name
+        path.write_text(text)
+        path.with_suffix(".json").write_text(csv_path.with_suffix(".json").read_text())
+        got = read_recording(path)
+        assert set(got.channels) == {"qg", "qm", "vir"}, name
+        assert np.allclose(got.time, rec.time, rtol=1e-9, atol=1e-12), name
+        for c in got.channels:
+            assert np.allclose(got.channels[c], rec.channels[c], rtol=1e-9, atol=1e-15), (name, c)
+    bad = tmp_path / "bad.tsv"
+    bad.write_text(exports["tabs.tsv"].replace("\n" + "\t".join(format(x, ".10g") for x in rows[3]),
+                                               "\n" + "\t".join(format(x, ".10g") for x in rows[3][:2]) + "\tn/a\t0\t0", 1))
+    bad.with_suffix(".json").write_text(csv_path.with_suffix(".json").read_text())
+    with pytest.raises(RecordingError, match=r"bad\.tsv: line 6, column 'q_m \(mm\)': 'n/a' is not a number$"):
+        read_recording(bad)

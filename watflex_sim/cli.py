@@ -114,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--exit-after", type=float, metavar="S", help="close the window after S s of wall time (demos, tests)")
 
     plot = sub.add_parser("plot", help="plot a recording (.csv + .json, or .mat + .json) to PNG and/or rerun")
-    plot.add_argument("recording", type=Path, help="NAME.csv or NAME.mat with NAME.json beside it")
+    plot.add_argument("recording", type=Path, help="NAME.csv (or .txt/.tsv/.dat text) or NAME.mat with NAME.json beside it")
     plot.add_argument("--png", type=Path, help="PNG path (default NAME.png beside the recording)")
     plot.add_argument("--rrd", type=Path, help="also write a rerun recording here")
     plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
@@ -125,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Diagnose recordings of one rig against its nominal model (recordings.md section 2): "
         "re-simulate, refit parameters within tolerance, locate the mismatch, fit catalogue effects, keep "
         "what improves held-out data. Writes DIR/report.json, fit_*.png, diagnosis.rrd, patched_model.xml, patch.json.")
-    diag.add_argument("recordings", nargs="+", type=Path, help="NAME.csv or NAME.mat, each with NAME.json beside it")
+    diag.add_argument("recordings", nargs="+", type=Path, help="NAME.csv (or .txt/.tsv/.dat: tab or space separated) or NAME.mat, each with NAME.json beside it (or the --rig's [sidecar])")
     diag.add_argument("--report", required=True, type=Path, help="output directory (created)")
     diag.add_argument("--rig", help=RIG_HELP + "; its default sidecar serves files that come without one, e.g. emps")
     diag.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes fitting candidates (default: all cores)")

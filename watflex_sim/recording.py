@@ -29,6 +29,10 @@ FORMAT = "flexarm-recording/1"
 # rig -> {channel: SI unit}: recordings.md section 1's vocabulary, from the rig descriptions (rigs/*.toml).
 CHANNELS: dict[str, dict[str, str]] = channel_units()
 
+TEXT_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")  # comma, tab or space separated (the header line says which)
+COMMENTS = ("#", "%")  # lines starting so, before the header or among the samples, are skipped
+IGNORED = "\0"  # prefix of a column the rig's [columns] maps to "": read, then dropped
+
 # A CSV cell: a decimal number, or nan/inf (nan is read as a missing sample like an empty cell).
 _NUMBER = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.I)
 
@@ -254,13 +258,16 @@ def _read_csv(path: Path, rig: str, source):
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    header, skip = _csv_header(path, source)
+    raw_header, skip, delimiter = _csv_header(path, source)
+    header = _file_columns(raw_header, rig)
     _check_header(header, rig, source)
+    if delimiter is None:  # columns aligned by spaces: pyarrow takes one delimiter character only
+        return _read_csv_lines(path, rig, source)
     try:
         reader = pacsv.open_csv(
             path, read_options=pacsv.ReadOptions(skip_rows=skip, column_names=header, block_size=BLOCK_BYTES,
                                                  use_threads=False),  # threads read the whole file ahead
-            parse_options=pacsv.ParseOptions(newlines_in_values=False, ignore_empty_lines=True),
+            parse_options=pacsv.ParseOptions(delimiter=delimiter, newlines_in_values=False, ignore_empty_lines=True),
             convert_options=pacsv.ConvertOptions(column_types={h: pa.float64() for h in header},
                                                  null_values=[""], strings_can_be_null=False))
         data, n = np.empty((len(header), 0)), 0
@@ -276,26 +283,50 @@ def _read_csv(path: Path, rig: str, source):
     except (pa.ArrowInvalid, pa.ArrowTypeError, UnicodeDecodeError, OSError):
         return _read_csv_lines(path, rig, source)
     cols = {h: data[j, :n] for j, h in enumerate(header)}  # rows of one array: no copy
-    time = cols.pop("time")
+    time, cols = _scaled(cols.pop("time"), cols, raw_header, rig)
     return time, cols, None  # None: line numbers unknown (blank lines are skipped); see read_recording
 
 
-def _csv_header(path: Path, source) -> tuple[list[str], int]:
-    """The header's cells (stripped) and the number of lines up to and including it."""
+def _csv_header(path: Path, source) -> tuple[list[str], int, str | None]:
+    """The header's cells (stripped), the number of lines up to and including it (blank lines and
+    lines starting with # or % before it are skipped), and the delimiter: "," (CSV), a tab, or None
+    (columns separated by runs of spaces)."""
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
             for n, line in enumerate(f, 1):
-                if line.strip():
+                if line.strip() and not line.lstrip().startswith(COMMENTS):
                     break
             else:
                 raise RecordingError(source, "empty file (no header line)")
     except UnicodeDecodeError as err:
         raise RecordingError(source, f"not UTF-8 text (byte {err.start})") from None
+    delimiter = "," if "," in line else "\t" if "\t" in line else None
+    if delimiter is None:
+        return line.split(), n, None
     try:
-        row = next(csv.reader([line], strict=True))
+        row = next(csv.reader([line], strict=True, delimiter=delimiter))
     except (csv.Error, StopIteration) as err:
         raise RecordingError(source, f"malformed CSV at line {n}: {err}") from None
-    return [c.strip() for c in row], n
+    return [c.strip() for c in row], n, delimiter
+
+
+def _file_columns(header: list[str], rig: str) -> list[str]:
+    """The file's column names as the recording's: renamed by the rig's [columns] table (a column
+    it maps to "" is kept as IGNORED + its name, and dropped after reading)."""
+    from .rigdesc import load_rig
+
+    table = load_rig(rig).columns
+    return [(table[h][0] or IGNORED + h) if h in table else h for h in header]
+
+
+def _scaled(time: np.ndarray, cols: dict, header: list[str], rig: str):
+    """Columns in the recording's units: each times its [columns] scale; ignored columns dropped."""
+    from .rigdesc import load_rig
+
+    table, names = load_rig(rig).columns, _file_columns(header, rig)
+    scale = {name: table[h][1] for h, name in zip(header, names) if h in table and table[h][1] != 1.0}
+    cols = {n: (x * scale[n] if n in scale else x) for n, x in cols.items() if not n.startswith(IGNORED)}
+    return (time * scale["time"] if "time" in scale else time), cols
 
 
 def _check_header(header: list[str], rig: str, source) -> None:
@@ -305,42 +336,52 @@ def _check_header(header: list[str], rig: str, source) -> None:
         dup = next(h for j, h in enumerate(header) if h in header[:j])
         raise RecordingError(source, f"duplicate column {_show(dup)} in header")
     if "time" not in header:
-        raise RecordingError(source, "no 'time' column in header")
-    _check_names([h for h in header if h != "time"], rig, source)
+        raise RecordingError(source, "no 'time' column in header (a rig's [columns] may name it)")
+    _check_names([h for h in header if h != "time" and not h.startswith(IGNORED)], rig, source)
+
+
+def _rows(f, delimiter: str | None):
+    """(line number, cells) of a text file's lines: csv.reader for a delimiter, else split at spaces."""
+    if delimiter is not None:
+        reader = csv.reader(f, strict=True, delimiter=delimiter)
+        for row in reader:
+            yield reader.line_num, row
+    else:
+        for n, line in enumerate(f, 1):
+            yield n, line.split()
 
 
 def _read_csv_lines(path: Path, rig: str, source):
-    """Parse the CSV line by line, stopping at the first bad line; return (time, channels, where)."""
-    header, rows, lines = None, [], []
+    """Parse the text line by line, stopping at the first bad line; return (time, channels, where)."""
+    raw_header, _, delimiter = _csv_header(path, source)
+    header, rows, lines, n = None, [], [], 0
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
-            reader = csv.reader(f, strict=True)
-            for row in reader:
-                if not row or (len(row) == 1 and not row[0].strip()):
-                    continue  # blank line
+            for n, row in _rows(f, delimiter):
+                if not row or (len(row) == 1 and not row[0].strip()) or row[0].lstrip().startswith(COMMENTS):
+                    continue  # blank or comment line
                 if header is None:
-                    header = [c.strip() for c in row]
+                    header = _file_columns([c.strip() for c in row], rig)
                     _check_header(header, rig, source)
                     continue
                 if len(row) != len(header):
-                    raise RecordingError(source, f"line {reader.line_num} has {len(row)} fields, "
-                                                 f"header has {len(header)}")
+                    raise RecordingError(source, f"line {n} has {len(row)} fields, header has {len(header)}")
                 cells = [c.strip() for c in row]
                 bad = [j for j, c in enumerate(cells) if c and not _NUMBER.fullmatch(c)]
                 if bad:
-                    raise RecordingError(source, f"line {reader.line_num}, column {header[bad[0]]!r}: "
+                    raise RecordingError(source, f"line {n}, column {raw_header[bad[0]]!r}: "
                                                  f"{_show(row[bad[0]])} is not a number")
                 rows.append([float(c) if c else np.nan for c in cells])
-                lines.append(reader.line_num)
+                lines.append(n)
     except csv.Error as err:
-        raise RecordingError(source, f"malformed CSV at line {reader.line_num}: {err}") from None
+        raise RecordingError(source, f"malformed CSV at line {n + 1}: {err}") from None
     except UnicodeDecodeError as err:
         raise RecordingError(source, f"not UTF-8 text (byte {err.start} of a block)") from None
     if header is None:
         raise RecordingError(source, "empty file (no header line)")
     data = np.array(rows, dtype=float).reshape(len(rows), len(header))
     cols = {h: np.ascontiguousarray(data[:, j]) for j, h in enumerate(header)}
-    time = cols.pop("time")
+    time, cols = _scaled(cols.pop("time"), cols, raw_header, rig)
     return time, cols, lambda i: f"line {lines[i]}"
 
 
@@ -433,15 +474,15 @@ def read_recording(path, sidecar: dict | None = None) -> Recording:
     path = Path(path)
     source = str(path)
     suffix = path.suffix.lower()
-    if suffix not in (".csv", ".mat"):
-        raise RecordingError(source, "not a .csv or .mat recording")
+    if suffix not in (*TEXT_SUFFIXES, ".mat"):
+        raise RecordingError(source, f"not a recording ({', '.join(TEXT_SUFFIXES)} text or .mat)")
     if suffix == ".mat":
         raw = _read_bytes(path, source)
     elif not path.is_file():
         _read_bytes(path, source)  # the same messages: not found, not readable, a directory
     meta = _load_sidecar(path) if sidecar is None else copy.deepcopy(sidecar)
     rig = _check_meta(meta, path.with_suffix(".json") if sidecar is None else source, True)
-    if suffix == ".csv":
+    if suffix in TEXT_SUFFIXES:
         try:
             time, chans, where = _read_csv(path, rig, source)
         except OSError as err:

@@ -18,6 +18,7 @@ processes (forked, spawned or a forkserver's) resolve names the same way.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import tomllib
 from collections.abc import Mapping
@@ -42,7 +43,7 @@ CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
-        "control_jitter_s", "datasheet")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
+        "control_jitter_s", "datasheet", "columns")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
 # velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, or the
 # current (A) of a datasheet drive (`actuator`).
@@ -74,6 +75,7 @@ class RigDescription:
     description: str = ""
     source: str = ""  # the rig file
     datasheet: dict | None = None  # the checked [datasheet] table (datasheet.check), if any
+    columns: dict = dataclasses.field(default_factory=dict)  # a text file's column -> (channel | "time" | "", scale)
 
     def units(self) -> dict[str, str]:
         return {c: spec["unit"] for c, spec in self.channels.items()}
@@ -198,6 +200,7 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     for effect, places in raw.get("effects", {}).items():
         if effect not in CATALOGUE or not isinstance(places, list):
             fail(f"effects: {effect!r} is not a catalogue effect with a list of places")
+    columns = _columns(raw.get("columns", {}), raw["channels"], fail)
     tables = {"controller": raw.get("controller", {"type": "none"})}
     if isinstance(raw.get("sidecar"), dict) and "controller" in raw["sidecar"]:
         tables["sidecar.controller"] = raw["sidecar"]["controller"]
@@ -218,7 +221,7 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
         mat_scalars=tuple(raw.get("mat_scalars", ())), sidecar=raw.get("sidecar"),
         description=raw.get("description", ""), source=source, mat_channels=raw.get("mat_channels"),
         mat_time=raw.get("mat_time"), control_period_s=float(period), control_jitter_s=float(jitter),
-        datasheet=datasheet if "datasheet" in raw else None,
+        datasheet=datasheet if "datasheet" in raw else None, columns=columns,
     )
     if description.model == DATASHEET:
         _command_defaults(description, fail)
@@ -227,6 +230,26 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     if description.sensors == "generic":
         _check_model(description, fail)
     return description
+
+
+def _columns(table, channels: dict, fail) -> dict[str, tuple[str, float]]:
+    """The [columns] table: a recording file's column name -> (the channel it holds, "time", or "" to
+    ignore it; the scale to the channel's unit, or to s for the time). A value is a name or
+    {channel, scale}."""
+    if not isinstance(table, dict):
+        fail("columns must be a table: file column = channel or { channel, scale }")
+    out = {}
+    for column, spec in table.items():
+        spec = {"channel": spec} if isinstance(spec, str) else spec
+        if not isinstance(spec, dict) or set(spec) - {"channel", "scale"} or not isinstance(spec.get("channel"), str):
+            fail(f"columns.{column!r}: must be a channel name or {{ channel, scale }}")
+        if spec["channel"] not in ("time", "", *channels):
+            fail(f"columns.{column!r}: {spec['channel']!r} is not a channel of the rig, \"time\" or \"\" (ignored)")
+        scale = spec.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or scale == 0 or not math.isfinite(scale):
+            fail(f"columns.{column!r}: scale must be a non-zero number, got {scale!r}")
+        out[column] = (spec["channel"], float(scale))
+    return out
 
 
 def _command_defaults(description: RigDescription, fail) -> None:
