@@ -179,7 +179,7 @@ def test_a_lab_text_export_is_read_through_the_rig_columns(tmp_path, monkeypatch
     """Recordings as users have them (issue 15, item 6): tab- or space-separated text with the lab's
     column names, mm and ms, mapped by the rig's [columns]; read, they equal the contract CSV they
     were written from (to the 10 digits written); a bad cell names the line and the file's column."""
-    from watflex_sim.recording import RecordingError, write_recording
+    from watflex_sim.recording import RecordingError
 
     monkeypatch.setenv("WATFLEX_RIGS", "")
     folder = make_rig(tmp_path / "myrig", lambda t: t + COLUMNS)
