@@ -69,6 +69,25 @@ def test_intervals_cover_a_linear_fit_as_often_as_they_say():
     assert covered / 400 == pytest.approx(0.95, abs=0.04)
 
 
+def test_a_nuisance_traded_off_widens_an_interval_by_its_prior():
+    """y = (a + b) t + noise, a an effect's parameter (no prior), b a rig parameter with a tolerance
+    prior of sd 0.05: the data fix only a + b, so a's 95 % half-width is 1.96 x sqrt(0.05^2 + the
+    noise's share) - linear-Gaussian algebra - and not the noise-only width it has with b left out
+    (issue 14: a friction side near 0 or a rig parameter at its bound, dropped, made intervals too narrow)."""
+    t = np.linspace(0, 1, 200)
+    y = 2.0 * t + 0.1 * np.random.default_rng(0).normal(size=t.size)
+    a = float(t @ y / (t @ t))
+    r = a * t - y
+    slots = [Slot(("effect", 0, "a"), -10, 10), Slot(("param", "b"), 0.5, 1.5)]
+    model = Model([{"effect": "x", "a": a}], {"b": 1.0})
+    J = np.column_stack([t, t])
+    alone = intervals(slots[:1], model, J[:, :1], r)[0]
+    joint = intervals(slots, model, J, r, [math.inf, 0.05])[0]
+    noise_sd = (alone[1] - alone[0]) / 2 / 1.96
+    assert (joint[1] - joint[0]) / 2 == pytest.approx(1.96 * math.hypot(0.05, noise_sd), rel=0.02)
+    assert (joint[1] - joint[0]) > 3 * (alone[1] - alone[0])
+
+
 def test_direction_follows_the_final_parameters():
     """A level per direction that is ~0 one way is one-sided; equal levels are 'both' (issue 14's
     stale label: 'both' with torque_positive 1e-28)."""

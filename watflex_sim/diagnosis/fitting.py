@@ -220,15 +220,20 @@ def serial_inflation(r: np.ndarray) -> float:
     return (1 + phi) / (1 - phi)
 
 
-def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray) -> dict[int, tuple[float, float]]:
-    """95 % intervals (physical units) of the free slots, by slot index: covariance
-    s^2 (J'J)^-1 with s^2 the residual variance per degree of freedom, times the serial-correlation
-    inflation; a parameter the residual does not depend on gets its whole bounds."""
+def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray,
+              prior_sd: list[float] | None = None) -> dict[int, tuple[float, float]]:
+    """95 % intervals (physical units, within the slots' bounds) of the slots, by slot index:
+    covariance (J'J / s^2 + P)^-1 with s^2 the residual variance per degree of freedom times the
+    serial-correlation inflation, and P the precision of a Gaussian prior of sd `prior_sd` (internal
+    units; inf: none) - a rig parameter's tolerance, so that one the data leave loose widens what it
+    trades off with by no more than its tolerance allows; a parameter the residual does not depend on
+    gets its whole bounds."""
     n, p = r.size, len(free)
     if p == 0 or n <= p:
         return {}
     s2 = float(r @ r) / (n - p) * serial_inflation(r)
-    cov = s2 * np.linalg.pinv(J.T @ J)
+    prior = np.array([0.0 if not math.isfinite(sd) else sd**-2 for sd in (prior_sd or [math.inf] * p)])
+    cov = np.linalg.pinv(J.T @ J / s2 + np.diag(prior)) if s2 > 0 else np.zeros((p, p))
     out = {}
     for i, slot in enumerate(free):
         u = slot.to_internal(value_of(model, slot))
@@ -237,5 +242,5 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray) -> d
             out[i] = (slot.low, slot.high)
             continue
         lo, hi = slot.to_value(u - 1.96 * sd), slot.to_value(u + 1.96 * sd)
-        out[i] = (float(lo), float(hi))
+        out[i] = (float(max(lo, slot.low)), float(min(hi, slot.high)))
     return out

@@ -12,6 +12,7 @@ the refit nominal model is within NOISE_MARGIN x the noise on training AND valid
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -356,8 +357,10 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
 
 def final_intervals(data: Data, runner: Runner, model: Model, trained: Model | None = None) -> dict[int, dict[str, tuple[float, float]]]:
     """95 % intervals of every effect parameter of the final model: effect index -> parameter -> (low, high).
-    A quantised parameter (a delay) is good to half its step. The Jacobian's interval (noise only) is
-    widened to SPLIT_WIDTH x the distance to the same parameter fitted on the training half alone
+    A quantised parameter (a delay) is good to half its step. The Jacobian's interval is over every
+    effect parameter and rig parameter together, those at a bound too (a friction side near 0 that
+    trades off with a viscous term widens it), the rig's with their tolerance as a prior (+-2 sd).
+    It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the training half alone
     (`trained`): on a rough (stick-slip) cost the fit's own scatter dominates; for unbiased estimates
     that distance is |N(0, sd)| of the all-data estimate, and SPLIT_WIDTH = 4 covers 84 % from that one
     sample (2/pi atan 4)."""
@@ -366,23 +369,18 @@ def final_intervals(data: Data, runner: Runner, model: Model, trained: Model | N
         for p in CATALOGUE[effect["effect"]][1]:
             if p.quantum and p.name in effect:
                 out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
-    free = []
-    for slot in effect_slots_of(data, model) + rig_slots(data):
-        value = value_of(model, slot)
-        if not _at_bound(slot, value):
-            free.append(slot)
-        elif slot.where[0] == "effect":  # held at its bound (a friction side at 0): not free, no spread
-            out.setdefault(slot.where[1], {})[slot.name] = (value, value)
     if not model.effects:
         return out
+    slots = effect_slots_of(data, model) + rig_slots(data)
     evaluate = evaluator(runner, "all")
     r = evaluate([model])[0]
     if r is None:
         return out
-    u = np.array([s.to_internal(value_of(model, s)) for s in free])
-    J = jacobian(evaluate, model, free, u, r)
-    for k, (low, high) in intervals(free, model, J, r).items():
-        slot = free[k]
+    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
+    J = jacobian(evaluate, model, slots, u, r)
+    prior = [s.span() / 4 if s.where[0] == "param" else math.inf for s in slots]  # tolerance = +-2 sd
+    for k, (low, high) in intervals(slots, model, J, r, prior).items():
+        slot = slots[k]
         if slot.where[0] == "effect":
             if trained is not None and len(trained.effects) == len(model.effects):
                 value, split = slot.to_internal(value_of(model, slot)), slot.to_internal(value_of(trained, slot))
@@ -391,11 +389,6 @@ def final_intervals(data: Data, runner: Runner, model: Model, trained: Model | N
                 high = max(high, min(slot.to_value(value + reach), slot.high))
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
     return out
-
-
-def _at_bound(slot: Slot, value: float) -> bool:
-    u, lo, hi = slot.to_internal(value), slot.to_internal(slot.low), slot.to_internal(slot.high)
-    return min(u - lo, hi - u) <= 0.01 * (hi - lo)
 
 
 def at_bounds(data: Data, model: Model) -> list[dict]:
@@ -460,5 +453,3 @@ def _scores(data: Data, sims: list[Recording], model: Model) -> dict:
     return {"train_nrmse": train["nrmse"], "held_out_nrmse": held["nrmse"], "train_noise_ratio": train["noise_ratio"],
             "held_out_noise_ratio": held["noise_ratio"], "effects": [dict(e) for e in model.effects],
             "parameters": dict(model.parameters)}
-
-
