@@ -313,3 +313,23 @@ def test_a_current_channel_names_a_datasheet_drive(tmp_path, edit, why):
     (tmp_path / "labarm.toml").write_text(edit(rig))
     with pytest.raises(ConfigError, match=f"labarm.toml: {why}"):
         load_rig(str(tmp_path / "labarm.toml"))
+
+
+@pytest.mark.parametrize("drive", ["current", "voltage"])
+def test_the_diagnosis_measures_effort_in_newton_metres(tmp_path, monkeypatch, drive):
+    """A friction level is sized from the peak actuator torque (diagnosis.data.scale_of, "effort"): on
+    a current drive the command channel's gain (eta Kt Kg = 0.8 x 0.1 x 50 = 4 N m/A); on a voltage
+    drive, whose channel gain is 1 (V into the motor), the model's stall torque per volt
+    eta Kg Km / R = 1 x 50 x 0.1 / 1.5 = 3.333 N m/V. Taking the volts for N m made the friction
+    probes of a 70:1 servo 8x too large, and the diagnosis named viscous friction for a Coulomb one."""
+    from watflex_sim.rigdesc import load_rig
+
+    rig = RIG.format(link=LINK)
+    if drive == "voltage":
+        rig = rig.replace('drive = { type = "current", actuator = "shoulder_motor", torque_constant = 0.1, efficiency = 0.8, '
+                          'limit = 2.0, bits = 12 }', f"drive = {VOLTAGE_DRIVE}").replace('unit = "A", kind = "command"',
+                                                                                      'unit = "V", kind = "command"')
+    (tmp_path / "labarm").mkdir()
+    (tmp_path / "labarm" / "rig.toml").write_text(rig)
+    per_unit = load_rig(str(tmp_path / "labarm" / "rig.toml")).effort_per_unit("current_cmd")
+    assert per_unit == pytest.approx(4.0 if drive == "current" else 50 * 0.1 / 1.5, rel=1e-5)  # the MJCF text keeps 6 digits

@@ -115,6 +115,16 @@ class RigDescription:
             raise ConfigError(f"n_segments must be an integer >= 2 on a rig with flexible parts, got {n_segments!r}")
         return dataclasses.replace(params, n_segments=n_segments)
 
+    def effort_per_unit(self, channel: str) -> float:
+        """N m (N on a slide) per unit of command `channel` at stall: its `gain` (actuator input per
+        command unit) times its actuator's own gain in a generic rig's model (a datasheet voltage
+        drive's N m/V; 1 for a motor taking N m); the laser arm's and Watflex's `gain` states it whole."""
+        gain = float(self.channels[channel].get("gain", 1.0))
+        actuator = self.channels[channel].get("actuator")
+        if self.sensors != "generic" or actuator is None:
+            return gain
+        return gain * _actuator_gains(self.source, _version(Path(self.source)))[str(actuator)]
+
     def make_sensors(self, model: mujoco.MjModel, data: mujoco.MjData, scenario: dict, period: float):
         """The rig's sensors and actuators on (model, data) (rigs.py): the generic ones read the
         channels' tables; the laser arm's and Watflex's are their own (1 ms only)."""
@@ -148,6 +158,13 @@ class RigDescription:
         if self.model in BUILDERS and self.model in RIGS:
             return BUILDERS[self.model](RIGS[self.model])
         raise ConfigError(f"{self.source}: model: no file {path}")
+
+
+@cache
+def _actuator_gains(source: str, version: int) -> dict[str, float]:
+    """actuator -> |gain| (force or torque per input) in the nominal model of the rig file `source` (at `version`)."""
+    model = load_rig(source).spec().compile()
+    return {model.actuator(i).name: abs(float(model.actuator_gainprm[i, 0])) for i in range(model.nu)}
 
 
 def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:

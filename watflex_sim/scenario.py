@@ -16,7 +16,7 @@ DEFAULTS = {
     "rig": None,  # laser_arm | watflex
     "experiment": None,  # a name, informative
     "duration_s": None,  # s, recorded length
-    "controller": None,  # table: type = pd_tip | pd_joint | none, and its parameters
+    "controller": None,  # table: type (a registered law, or none) and its parameters; absent: the rig's [controller]
     "reference": [],  # table(s): channel, kind (step|staircase|triangle|constant), parameters
     "command": [],  # table(s) for open loop: channel, kind, parameters
     "direction": "positive",  # positive | negative: sign of references and open-loop commands
@@ -141,6 +141,10 @@ def load_scenario(name_or_path: str, overrides: list[str] = ()) -> dict:
     scenario["name"] = path.stem
     for assignment in overrides:
         apply_override(scenario, assignment)
+    if scenario.get("controller") is None and isinstance(scenario.get("rig"), str):  # the rig's own law
+        from .rigdesc import load_rig
+
+        scenario["controller"] = copy.deepcopy(load_rig(scenario["rig"]).controller)
     return check(scenario)
 
 

@@ -260,7 +260,7 @@ def scale_of(data: Data, param, where: str) -> float:
     for rec in data.recordings:
         for c in data.rig.of_kind("command"):
             if c in rec.channels:
-                efforts.append(peak(rec.channels[c]) * data.rig.channels[c].get("gain", 1.0))
+                efforts.append(peak(rec.channels[c]) * data.rig.effort_per_unit(c))
         motion = motion_channel(rec, data.rig)
         if motion:
             speeds.append(peak(np.gradient(rec.channels[motion], rec.time)))

@@ -428,7 +428,7 @@ def offset_alternative(data: Data, runner: Runner, base: Model, result: dict) ->
                     if data.rig.channels.get(c, {}).get("joint") == where), None)
     if channel is None or abs(a - b) <= 0.05 * (a + b) / 2:
         return None
-    gain = data.rig.channels[channel].get("gain", 1.0)
+    gain = data.rig.effort_per_unit(channel)  # N m (N) per command unit
     trial = Model(base.effects + [dict(effect="coulomb_friction", where=where, torque_positive=(a + b) / 2, torque_negative=(a + b) / 2),
                                   dict(effect="actuator_offset", where=channel, offset=(b - a) / 2 / gain)],
                   dict(result["model"].parameters))
