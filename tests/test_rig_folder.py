@@ -210,3 +210,16 @@ def test_a_lab_text_export_is_read_through_the_rig_columns(tmp_path, monkeypatch
     bad.with_suffix(".json").write_text(csv_path.with_suffix(".json").read_text())
     with pytest.raises(RecordingError, match=r"bad\.tsv: line 6, column 'q_m \(mm\)': 'n/a' is not a number$"):
         read_recording(bad)
+
+
+def test_a_scenario_without_a_controller_runs_the_rigs_own(rigdir):
+    """A scenario that names no [controller] runs the rig file's [controller] (its law, its gains);
+    the recording's sidecar names it, so the diagnosis re-runs the same law."""
+    from watflex_sim.rigdesc import use_rig
+
+    rig = use_rig(str(rigdir))
+    path = rigdir.parent / "moves.toml"
+    path.write_text(SCENARIO.format(effects="").split("[controller]")[0])
+    scenario = load_scenario(path)
+    assert scenario["controller"] == rig.controller and rig.controller["type"] == "cascade_p"
+    assert simulate(dict(scenario, duration_s=0.05)).recording.meta["controller"] == rig.controller
