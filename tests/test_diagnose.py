@@ -227,3 +227,19 @@ def test_clean_recordings_with_parameter_error_are_nothing_missing():
     assert report["verdict"] == "nothing_missing", report["verdict_reason"]
     assert report["findings"] == [] and report["patch"]["effects"] == []
     assert report["noise"]["training_ratio"] <= NOISE_MARGIN and report["noise"]["validation_ratio"] <= NOISE_MARGIN
+
+
+def test_a_command_limit_is_probed_down_its_range():
+    """A command limit acts only where the command passes it: probed at one value (0.7 x the peak
+    command) its signature says nothing of a limit at 0.4 x, and on a +-5 V amplifier whose commands
+    peaked at 12.6 V the fit stayed at 8.4 V (validation 6.5x the noise). The probes now go down to
+    0.3 x the start (0.21 x the peak), within the catalogue's bounds (0.1-1.5 x the peak); the same
+    case then finds 5.003 V (docs/diagnosis.md)."""
+    from watflex_sim.diagnosis import Candidate, Slot
+
+    peak = 12.6  # V
+    cand = Candidate("current_saturation", "voltage", {"limit": 0.7 * peak},
+                     {"limit": Slot(("effect", -1, "limit"), 0.1 * peak, 1.5 * peak)}, {})
+    limits = sorted(v["limit"] for v in cand.probes().values())
+    assert limits == pytest.approx([0.3 * 0.7 * peak, 0.5 * 0.7 * peak, 0.75 * 0.7 * peak, 0.7 * peak])
+    assert all(0.1 * peak <= v <= 1.5 * peak for v in limits)

@@ -25,6 +25,8 @@ from .runner import evaluator, held, simulate_all
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
 # the other side of neutral (0.9 -> 2.0): a stiffer link than the datasheet's is as likely as a softer one
 SWITCH_LEVELS = (1.0, 0.1, 0.01)  # x start of a switch candidate's log-scaled size (width, stiffness, ...)
+LIMIT_LEVELS = (1.0, 0.75, 0.5, 0.3)  # x start of a switch candidate's linear size (a command limit): a limit
+# acts only where the command passes it, so one probe at the start (0.7 x the peak) says nothing of one at 0.4
 LARGE_PROBE = 4.0  # x (start - neutral): friction-like levels and `wide` parameters are probed
 # small and large, since a small dry friction can move a closed loop the other way from a large
 # one (stick-slip is not linear) and a mode frequency goes with the square root of a stiffness
@@ -61,10 +63,12 @@ class Candidate:
     def probes(self) -> dict[tuple[float, str], dict[str, float]]:
         """Parameter sets to simulate: (level, parameter) -> values, one per neutral parameter
         and level, or (1, "switch") with every parameter at its start."""
-        if not self.neutral:  # a log-scaled size is probed over two decades below its start
+        if not self.neutral:  # a log-scaled size is probed over two decades below its start, a linear one down to 0.3 x
             first = next(iter(self.start))
-            levels = SWITCH_LEVELS if self.slots[first].log else (1.0,)
-            return {(level, "switch"): {**self.start, first: self.start[first] * level} for level in levels}
+            slot = self.slots[first]
+            levels = SWITCH_LEVELS if slot.log else LIMIT_LEVELS
+            return {(level, "switch"): {**self.start, first: float(np.clip(self.start[first] * level, slot.low, slot.high))}
+                    for level in levels}
         at_zero = {**self.start, **self.neutral}
         return {(level, name): {**at_zero, name: self.probe(name, level)} for level in self.levels for name in self.neutral}
 
