@@ -11,6 +11,7 @@ import pytest
 from watflex_sim import datasheet
 from watflex_sim.beam_theory import clamped_free_frequencies, tip_deflection
 from watflex_sim.cli import EXIT_BAD_INPUT, main
+from watflex_sim.effects import Patch, knob_body_inertia
 from watflex_sim.model import MODELS_DIR, ConfigError
 from watflex_sim.params import LASER_ARM, WATFLEX
 
@@ -183,6 +184,31 @@ def test_laser_arm_numbers_give_the_bundled_models_link():
     assert hub_inertia(ours) == pytest.approx(hub_inertia(bundled), rel=1e-4)  # J_arm + N^2 J_e = 1.407 kg m^2
     for key in ("gainprm", "biasprm", "forcerange", "ctrlrange"):
         assert getattr(ours.actuator("motor"), key) == pytest.approx(getattr(bundled.actuator("motor"), key), rel=1e-6)
+
+
+def test_a_hub_disc_carries_hub_inertia_and_a_stage_mass_is_a_point():
+    """`hub_radius`: hub_inertia (0.02 kg m^2) becomes a solid disc's own inertia about z (geom named after the
+    joint, mass 2 J / r^2 = 16 kg at r = 0.05 m) instead of armature, so M[0, 0] is unchanged (to 1e-6: the
+    XML's digits) and a geom_mass knob on it scales J alone; a stage `mass` (kg) adds only 4e-7 m kg m^2
+    (a 1 mm sphere) about the joint [ours: m r^2 / 2, 2/5 m r^2]. Only a flexible link's stage has a disc."""
+    plain = stage_datasheet(LINK, extra="hub_inertia = 0.02\nmass = 3.0")
+    disc = stage_datasheet(LINK, extra="hub_inertia = 0.02\nmass = 3.0\nhub_radius = 0.05")
+    spec = datasheet.build(disc)
+    assert spec.geom("drive1").size[0] == 0.05 and spec.geom("drive1").mass == pytest.approx(16.0)
+    a, b = datasheet.build(plain).compile(), spec.compile()
+    assert b.dof_armature[0] == 0 and a.dof_armature[0] == pytest.approx(0.02)
+    assert hub_inertia(b) == pytest.approx(hub_inertia(a), rel=1e-6)
+    patch = Patch()
+    knob_body_inertia(patch, "drive1", 1.03)
+    patch.spec_edits[0](spec)
+    assert hub_inertia(spec.compile()) - hub_inertia(b) == pytest.approx(0.03 * 0.02, rel=1e-6)
+    bare = datasheet.build(stage_datasheet(LINK, extra="hub_inertia = 0.02")).compile()
+    assert hub_inertia(a) - hub_inertia(bare) == pytest.approx(0.4 * 3.0 * 1e-3**2, rel=1e-6)
+    with pytest.raises(ConfigError, match=r"stages\[1\].hub_radius: a hub disc only on a flexible link's stage"):
+        stage_datasheet('{ type = "torsional_spring", name = "load", length = 0.1, stiffness = 5.0 }',
+                        extra="hub_inertia = 0.02\nhub_radius = 0.05")
+    with pytest.raises(ConfigError, match=r"stages\[1\].hub_radius: the hub disc carries hub_inertia, which is missing"):
+        stage_datasheet(LINK, extra="hub_radius = 0.05")
 
 
 def test_watflex_link2_numbers_give_the_bundled_models_link():
