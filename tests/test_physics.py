@@ -103,8 +103,8 @@ def test_laser_arm_bending_frequencies_match_clamped_free_beam(payload):
     the clamped-free beam with a tip mass (beam_theory.clamped_free_frequencies, Blevins
     table 8-1), tip mass = tip sensor 0.15 kg (rigs.md §1, paper table 2) + payload.
 
-    Measured (error vs. closed form): payload 0: 32.81 / 224.8 / 659.1 Hz (+0.15 / +0.54 /
-    +0.88 %); payload 0.7 kg: 19.17 / 197.6 / 618.3 Hz (+0.11 / +0.33 / +0.34 %).
+    Measured (error vs. closed form): payload 0: 32.81 / 224.9 / 659.7 Hz (+0.15 / +0.57 /
+    +0.97 %); payload 0.7 kg: 19.17 / 197.7 / 618.7 Hz (+0.11 / +0.35 / +0.40 %).
     """
     model = load_model("laser_arm", payload_kg=payload, locked_joints=HUB_LOCKED)
     dofs = hinge_dofs(model, "beam")
@@ -240,7 +240,7 @@ def test_gauge_strain_matches_thesis_eq_3_3(link, force):
 
 def test_laser_arm_inertia_about_hub():
     """M[hub, hub] - armature at the straight pose = beam + tip sensor + hub inertia about the
-    axis: J_arm = 0.639 kg m^2 within 1 % (rigs.md §1, paper table 4). Measured 0.63902."""
+    axis: J_arm = 0.639 kg m^2 within 1 % (rigs.md §1, paper table 4). Measured 0.63901."""
     model = load_model("laser_arm")
     data = mujoco.MjData(model)
     hub = model.joint("hub").dofadr[0]

@@ -32,7 +32,7 @@ import scipy.linalg
 from .beam_theory import clamped_free_frequencies
 from .build import BEAM_RGBA, MASS_RGBA, RIGID_RGBA, _spec, add_flexible_chain, chain_tip_x
 from .model import ConfigError
-from .params import STICK_SOLIMP, STICK_SOLREF, Beam
+from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, Beam, LaserArm
 
 MODE_TOLERANCE = 0.01  # the first three clamped modes within 1 % of the closed form
 MAX_SEGMENTS = 60
@@ -448,3 +448,18 @@ def model_xml(d: dict, name: str) -> str:
 def _xml(d_json: str, name: str) -> str:
     return build(json.loads(d_json), name).to_xml()
 
+
+def laser_arm_datasheet(p: LaserArm) -> dict:
+    """The laser arm of params.py (rigs.md §1) as a checked datasheet: hub `hub` (reflected motor N^2 J_e
+    as armature, J_hub as a disc of `hub_radius`), voltage drive `motor`, flexible link `beam` with the tip
+    sensor as its tip mass and p.n_segments segments."""
+    b = p.beam
+    stage = {"joint": "hub", "gear": p.gear_ratio, "rotor_inertia": p.motor_inertia, "hub_inertia": p.hub_inertia,
+             "hub_radius": p.hub_radius, "damping": p.hub_viscous,
+             "drive": {"type": "voltage", "actuator": "motor", "torque_constant": p.torque_constant,
+                       "resistance": p.resistance, "efficiency": p.gear_efficiency, "back_emf": p.back_emf,
+                       "limit": p.voltage_limit, "current_limit": p.current_limit},
+             "link": {"type": "flexible", "name": "beam", "length": b.length, "EI": b.EI,
+                      "mass_per_length": b.mass_per_length, "thickness": b.thickness, "height": b.height,
+                      "tip_mass": p.tip_sensor_mass, "damping_ratio": b.damping_ratio, "n_segments": p.n_segments}}
+    return check({"timestep": p.timestep, "gravity": GRAVITY, "stages": [stage]}, "params.py LaserArm")
