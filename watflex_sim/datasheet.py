@@ -36,7 +36,7 @@ from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, Beam, LaserArm
 
 MODE_TOLERANCE = 0.01  # the first three clamped modes within 1 % of the closed form
 MAX_SEGMENTS = 60
-TINY = 1e-6  # kg, kg m^2: a body needs some mass; a hub's inertia is its joint's armature
+TINY = 1e-6  # kg, kg m^2: a body needs some mass; a hub's inertia is its joint's armature (or its disc)
 
 # key -> (unit, required); "" unit: a name or a choice. Units as written in rig files.
 TOP_KEYS = {"timestep": ("s", True), "gravity": ("m/s^2", False), "stages": ("", True)}
@@ -394,8 +394,9 @@ def build(d: dict, name: str = "datasheet_rig") -> mujoco.MjSpec:
         _hinge(hub, stage["joint"], stage.get("damping", 0.0), arm=armature(stage))
         link = stage["link"]
         if link["type"] == "flexible":
-            if "hub_radius" in stage:  # a solid disc about z: m r^2 / 2 = hub_inertia
-                _geom(hub, stage["joint"], mujoco.mjtGeom.mjGEOM_CYLINDER, [stage["hub_radius"], 0.03], disc_mass(stage), RIGID_RGBA)
+            if "hub_radius" in stage:  # a solid disc about z, 60 mm thick: m r^2 / 2 = hub_inertia
+                disc = [stage["hub_radius"], 0.03]
+                _geom(hub, stage["joint"], mujoco.mjtGeom.mjGEOM_CYLINDER, disc, disc_mass(stage), RIGID_RGBA)
             if stage.get("mass", 0.0) > 0:  # a point mass (1 mm sphere), drawn as a massless 20 mm one
                 _geom(hub, f"hub{n + 1}", mujoco.mjtGeom.mjGEOM_SPHERE, [1e-3], stage["mass"], MASS_RGBA).group = 3
                 _geom(hub, f"hub{n + 1}_drawing", mujoco.mjtGeom.mjGEOM_SPHERE, [0.02], 0.0, MASS_RGBA)
