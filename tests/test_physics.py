@@ -103,8 +103,8 @@ def test_laser_arm_bending_frequencies_match_clamped_free_beam(payload):
     the clamped-free beam with a tip mass (beam_theory.clamped_free_frequencies, Blevins
     table 8-1), tip mass = tip sensor 0.15 kg (rigs.md §1, paper table 2) + payload.
 
-    Measured (error vs. closed form): payload 0: 32.81 / 224.8 / 659.1 Hz (+0.15 / +0.54 /
-    +0.88 %); payload 0.7 kg: 19.17 / 197.6 / 618.3 Hz (+0.11 / +0.33 / +0.34 %).
+    Measured (error vs. closed form): payload 0: 32.81 / 224.9 / 659.7 Hz (+0.15 / +0.57 /
+    +0.97 %); payload 0.7 kg: 19.17 / 197.7 / 618.7 Hz (+0.11 / +0.35 / +0.40 %).
     """
     model = load_model("laser_arm", payload_kg=payload, locked_joints=HUB_LOCKED)
     dofs = hinge_dofs(model, "beam")
@@ -240,7 +240,7 @@ def test_gauge_strain_matches_thesis_eq_3_3(link, force):
 
 def test_laser_arm_inertia_about_hub():
     """M[hub, hub] - armature at the straight pose = beam + tip sensor + hub inertia about the
-    axis: J_arm = 0.639 kg m^2 within 1 % (rigs.md §1, paper table 4). Measured 0.63902."""
+    axis: J_arm = 0.639 kg m^2 within 1 % (rigs.md §1, paper table 4). Measured 0.63901."""
     model = load_model("laser_arm")
     data = mujoco.MjData(model)
     hub = model.joint("hub").dofadr[0]
@@ -311,9 +311,9 @@ def test_undamped_free_vibration_conserves_energy(rig, locks, timestep, initial)
     Integrator: implicitfast, which with zero damping is semi-implicit (symplectic) Euler: its
     energy error oscillates, bounded, with relative amplitude ~ w h / 2 per excited mode.
     The nominal steps (0.1 / 0.5 ms) are NOT usable undamped: the stiffest chain mode
-    (w_max = 62 200 rad/s laser, ~42 000 rad/s Watflex at N = 12) needs w_max h < 2; the nominal models
+    (w_max = 63 400 rad/s laser, ~42 000 rad/s Watflex at N = 12) needs w_max h < 2; the nominal models
     rely on the implicitly integrated beam damping for stability. Steps used: laser 25 us
-    (w_max h = 1.56), Watflex 40 us (~1.7).
+    (w_max h = 1.58), Watflex 40 us (~1.7).
     Initial state: laser beam in the static shape of a tip load (1 cm at the tip), which excites
     all modes - measured +-0.28 % (RK4 at 20 us: -0.005 %); Watflex in its first mode shape
     (1 cm at the end effector) - measured +-0.007 %. (Watflex in the static shape would need
@@ -349,7 +349,8 @@ def test_nominal_damping_never_creates_energy(rig, locks):
     physics step to the next over 2 s of free vibration from a static tip deflection of 1 cm:
     every step's increase <= 1e-9 of the initial vibration energy (roundoff allowance).
     Measured largest one-step change / E0: laser hub locked -1.1e-7 (a decrease), laser free
-    +1.4e-14 (roundoff once the motion has died out: E(2 s) = 0 to roundoff), Watflex locked
+    -2e-43 (once the motion has died out: E(2 s) = 0 to roundoff; +1.4e-14 with the former 15 mm
+    tip-sensor sphere), Watflex locked
     -2.8e-6, Watflex free -1.9e-5 (E(2 s)/E0 = 0.96 locked, 0.66 free: the locked arm's first
     mode, 0.54 Hz, is lightly damped by beta = 2 zeta / w1(link 2 with 8.1 kg)).
     """

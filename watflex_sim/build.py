@@ -1,4 +1,5 @@
-"""Build both rigs' MuJoCo models from `params.py` with `mujoco.MjSpec`.
+"""Build the bundled rigs' MuJoCo models from `params.py` with `mujoco.MjSpec`: Watflex and EMPS
+here, the laser arm through the datasheet builder (datasheet.py), which it fits.
 
 Flexible beams are "rigid finite element" chains: a beam of length L is cut into N elements
 of length dx = L/N; a hinge with stiffness k = EI/dx and damping c = beta k sits at the middle
@@ -78,40 +79,10 @@ def chain_tip_x(beam, n_segments: int) -> float:
 
 
 def build_laser_arm(p: LaserArm) -> mujoco.MjSpec:
-    """The laser arm: hub + reflected motor, flexible beam, tip sensor mass, voltage drive."""
-    spec = _spec("laser_arm", p.timestep)
-    spec.worldbody.add_light(name="top", pos=[0.5, 0, 3], dir=[0, 0, -1])
-    hub = spec.worldbody.add_body(name="hub_body", pos=[0, 0, 0.1])
-    joint = hub.add_joint(name="hub", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
-    joint.armature = p.reflected_motor_inertia  # N^2 J_e, kg m^2
-    joint.damping = [p.hub_viscous, 0, 0]  # N m s/rad (linear term only)
-    # No dry friction in the nominal model (rigs.md §1); if an effect adds some, it sticks hard.
-    joint.solref_friction = list(STICK_SOLREF)
-    joint.solimp_friction = list(STICK_SOLIMP)
-    # Hub: a cylinder about z whose inertia m r^2 / 2 is the derived J_hub.
-    radius = 0.05
-    g = hub.add_geom(name="hub", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius, 0.03, 0])
-    g.mass = 2 * p.hub_inertia / radius**2
-    g.rgba = RIGID_RGBA
-    g.contype = g.conaffinity = 0
-    tip = add_flexible_chain(hub, "beam", p.beam, p.n_segments, 0.0)
-    x_tip = chain_tip_x(p.beam, p.n_segments)
-    s = tip.add_geom(name="tip_sensor", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.015, 0, 0], pos=[x_tip, 0, 0])
-    s.mass = p.tip_sensor_mass
-    s.rgba = MASS_RGBA
-    s.contype = s.conaffinity = 0
-    tip.add_site(name="tip", pos=[x_tip, 0, 0], size=[0.005, 0, 0])
-    tip.add_site(name="payload", pos=[x_tip, 0, 0], size=[0.005, 0, 0])
-    # Voltage drive: tau = eta N K_T clip((u - K_E w)/R, +-i_max) (rigs.md §1, paper eq. 17-18)
-    # as gain*u + bias*w with the force range at the current limit.
-    motor = spec.add_actuator(name="motor", target="hub", trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    motor.gainprm[0] = p.torque_per_amp / p.resistance  # N m/V
-    motor.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-    motor.biasprm[2] = -p.torque_per_amp * p.back_emf / p.resistance  # N m s/rad
-    motor.forcerange = [-p.torque_per_amp * p.current_limit, p.torque_per_amp * p.current_limit]
-    motor.ctrlrange = [-p.voltage_limit, p.voltage_limit]
-    spec.add_key(name="home")
-    return spec
+    """The laser arm (rigs.md §1): the datasheet model (datasheet.build) of datasheet.laser_arm_datasheet(p)."""
+    from . import datasheet  # datasheet.py builds on this module's chain
+
+    return datasheet.build(datasheet.laser_arm_datasheet(p), "laser_arm")
 
 
 def _bearing(body, name: str, mass: float, p: Watflex):

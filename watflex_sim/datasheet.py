@@ -2,7 +2,11 @@
 
 A serial planar chain of stages, each a hub joint (hinge about z) and a link:
 - hub `joint`: armature gear^2 rotor_inertia + hub_inertia (kg m^2 at the output), viscous
-  `damping` (N m s/rad), the stage's `mass` (kg) at the joint (carried by the previous link's tip);
+  `damping` (N m s/rad), the stage's `mass` (kg) at the joint (carried by the previous link's tip; a
+  point: a 1 mm sphere, 4e-7 kg m^2 per kg, drawn as a massless 20 mm one); with `hub_radius` (m,
+  flexible links only) the hub is a solid disc of that radius, a geom named after the joint, whose
+  inertia about z is hub_inertia (mass 2 hub_inertia / hub_radius^2, carried like `mass`) instead of
+  armature, so a refit `geom_mass` knob on it scales the hub inertia alone;
 - link `flexible`: an RFE chain (build.add_flexible_chain: hinges of EI/dx, damping beta EI/dx with
   beta giving `damping_ratio` on the first clamped mode), with `n_segments` chosen so that the first
   three clamped modes are within 1 % of Euler-Bernoulli (beam_theory) unless given;
@@ -26,17 +30,18 @@ import numpy as np
 import scipy.linalg
 
 from .beam_theory import clamped_free_frequencies
-from .build import BEAM_RGBA, MASS_RGBA, _spec, add_flexible_chain, chain_tip_x
+from .build import BEAM_RGBA, MASS_RGBA, RIGID_RGBA, _spec, add_flexible_chain, chain_tip_x
 from .model import ConfigError
-from .params import STICK_SOLIMP, STICK_SOLREF, Beam
+from .params import GRAVITY, STICK_SOLIMP, STICK_SOLREF, Beam, LaserArm
 
 MODE_TOLERANCE = 0.01  # the first three clamped modes within 1 % of the closed form
 MAX_SEGMENTS = 60
-TINY = 1e-6  # kg, kg m^2: a body needs some mass; a hub's inertia is its joint's armature
+TINY = 1e-6  # kg, kg m^2: a body needs some mass; a hub's inertia is its joint's armature (or its disc)
 
 # key -> (unit, required); "" unit: a name or a choice. Units as written in rig files.
 TOP_KEYS = {"timestep": ("s", True), "gravity": ("m/s^2", False), "stages": ("", True)}
-STAGE_KEYS = {"joint": ("", False), "hub_inertia": ("kg m^2", False), "rotor_inertia": ("kg m^2", False),
+STAGE_KEYS = {"joint": ("", False), "hub_inertia": ("kg m^2", False), "hub_radius": ("m", False),
+              "rotor_inertia": ("kg m^2", False),
               "gear": ("1", False), "damping": ("N m s/rad", False), "mass": ("kg", False),
               "drive": ("", True), "link": ("", True)}
 DRIVE_KEYS = {
@@ -145,6 +150,10 @@ def check(raw, source: str) -> dict:
             link["EI"] = _bending_stiffness(link, f"{at}.link")
             if "n_segments" in link and (link["n_segments"] != int(link["n_segments"]) or link["n_segments"] < 2):
                 raise ConfigError(f"{at}.link.n_segments: must be a whole number >= 2, got {link['n_segments']!r}")
+            if "hub_radius" in stage and "hub_inertia" not in stage:
+                raise ConfigError(f"{at}.hub_radius: the hub disc carries hub_inertia, which is missing")
+        elif "hub_radius" in stage:
+            raise ConfigError(f"{at}.hub_radius: a hub disc only on a flexible link's stage")
         elif "stiffness" not in link:
             link["stiffness"] = 3 * _bending_stiffness(link, f"{at}.link") / link["length"]
         if link["type"] == "torsional_spring" and "inertia" in link and "total_inertia" in link:
@@ -163,8 +172,14 @@ def check(raw, source: str) -> dict:
 
 
 def armature(stage: dict) -> float:
-    """Hub inertia at the output (kg m^2): gear^2 rotor_inertia + hub_inertia."""
-    return stage.get("gear", 1.0) ** 2 * stage.get("rotor_inertia", 0.0) + stage.get("hub_inertia", 0.0)
+    """Hub inertia at the output (kg m^2): gear^2 rotor_inertia + hub_inertia (unless a hub disc carries it)."""
+    hub = 0.0 if "hub_radius" in stage else stage.get("hub_inertia", 0.0)
+    return stage.get("gear", 1.0) ** 2 * stage.get("rotor_inertia", 0.0) + hub
+
+
+def disc_mass(stage: dict) -> float:
+    """Mass (kg) of the hub disc (`hub_radius`): a solid disc of inertia hub_inertia, 2 J / r^2; 0 without one."""
+    return 2 * stage["hub_inertia"] / stage["hub_radius"] ** 2 if "hub_radius" in stage else 0.0
 
 
 def torque_per_amp(stage: dict) -> float:
@@ -217,7 +232,7 @@ def reach(link: dict) -> float:
 
 def outboard_mass(stages: list[dict], n: int) -> float:
     """Mass (kg) that link n (0-based) carries at its tip: its tip load and every later stage."""
-    later = sum(s.get("mass", 0.0) + link_mass(s["link"]) for s in stages[n + 1:])
+    later = sum(s.get("mass", 0.0) + disc_mass(s) + link_mass(s["link"]) for s in stages[n + 1:])
     return stages[n]["link"].get("tip_mass", 0.0) + later
 
 
@@ -229,7 +244,7 @@ def _outboard_inertia(stages: list[dict], n: int) -> float:
     x = reach(link)
     for s in stages[n + 1:]:
         nxt = s["link"]
-        total += s.get("mass", 0.0) * x**2
+        total += (s.get("mass", 0.0) + disc_mass(s)) * x**2 + (s["hub_inertia"] if "hub_radius" in s else 0.0)
         if nxt["type"] == "torsional_spring":
             xt = x + nxt.get("tip_distance", nxt["length"])
             total += nxt.get("tip_mass", 0.0) * xt**2 + tip_inertia(nxt) + nxt.get("inertia", 0.0)
@@ -316,6 +331,13 @@ def _inertial(body, mass: float, x: float, izz: float) -> None:
     body.mass, body.ipos, body.inertia = mass, [x, 0, 0], [izz, izz, izz]
 
 
+def _geom(body, name: str, kind, size: list[float], mass: float, rgba):
+    """A geom that collides with nothing: `size` (m) as MuJoCo's, `mass` (kg)."""
+    g = body.add_geom(name=name, type=kind, size=size + [0.0] * (3 - len(size)))
+    g.mass, g.rgba, g.contype, g.conaffinity = mass, rgba, 0, 0
+    return g
+
+
 def _bar(body, name: str, length: float, width: float) -> None:
     """A massless drawing of a link, `width` m wide."""
     g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[length / 2, width / 2, 0.005], pos=[length / 2, 0, 0])
@@ -372,9 +394,12 @@ def build(d: dict, name: str = "datasheet_rig") -> mujoco.MjSpec:
         _hinge(hub, stage["joint"], stage.get("damping", 0.0), arm=armature(stage))
         link = stage["link"]
         if link["type"] == "flexible":
-            if stage.get("mass", 0.0) > 0:
-                g = hub.add_geom(name=f"hub{n + 1}", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.02, 0, 0])
-                g.mass, g.rgba, g.contype, g.conaffinity = stage["mass"], MASS_RGBA, 0, 0
+            if "hub_radius" in stage:  # a solid disc about z, 60 mm thick: m r^2 / 2 = hub_inertia
+                disc = [stage["hub_radius"], 0.03]
+                _geom(hub, stage["joint"], mujoco.mjtGeom.mjGEOM_CYLINDER, disc, disc_mass(stage), RIGID_RGBA)
+            if stage.get("mass", 0.0) > 0:  # a point mass (1 mm sphere), drawn as a massless 20 mm one
+                _geom(hub, f"hub{n + 1}", mujoco.mjtGeom.mjGEOM_SPHERE, [1e-3], stage["mass"], MASS_RGBA).group = 3
+                _geom(hub, f"hub{n + 1}_drawing", mujoco.mjtGeom.mjGEOM_SPHERE, [0.02], 0.0, MASS_RGBA)
             parent, x = _flexible(hub, stages, n)
         else:
             _inertial(hub, stage["mass"] if stage.get("mass", 0.0) > 0 else TINY, 0.0, TINY)
@@ -423,3 +448,19 @@ def model_xml(d: dict, name: str) -> str:
 @cache
 def _xml(d_json: str, name: str) -> str:
     return build(json.loads(d_json), name).to_xml()
+
+
+def laser_arm_datasheet(p: LaserArm) -> dict:
+    """The laser arm of params.py (rigs.md §1) as a checked datasheet: hub `hub` (reflected motor N^2 J_e
+    as armature, J_hub as a disc of `hub_radius`), voltage drive `motor`, flexible link `beam` with the tip
+    sensor as its tip mass and p.n_segments segments."""
+    b = p.beam
+    stage = {"joint": "hub", "gear": p.gear_ratio, "rotor_inertia": p.motor_inertia, "hub_inertia": p.hub_inertia,
+             "hub_radius": p.hub_radius, "damping": p.hub_viscous,
+             "drive": {"type": "voltage", "actuator": "motor", "torque_constant": p.torque_constant,
+                       "resistance": p.resistance, "efficiency": p.gear_efficiency, "back_emf": p.back_emf,
+                       "limit": p.voltage_limit, "current_limit": p.current_limit},
+             "link": {"type": "flexible", "name": "beam", "length": b.length, "EI": b.EI,
+                      "mass_per_length": b.mass_per_length, "thickness": b.thickness, "height": b.height,
+                      "tip_mass": p.tip_sensor_mass, "damping_ratio": b.damping_ratio, "n_segments": p.n_segments}}
+    return check({"timestep": p.timestep, "gravity": GRAVITY, "stages": [stage]}, "params.py LaserArm")

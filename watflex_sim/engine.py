@@ -130,7 +130,7 @@ class GrowthMonitor:
     (a ramped load, a trajectory) grows like a power of t, its ratios falling towards 1 (a 4 s
     half-cosine force on the locked Watflex: x34, x12, x5.8, ... x1.5); a numerical instability
     (a step too large for the stiffest chain, gains too high) multiplies E by a constant factor
-    per window: the laser arm at 0.2 ms grows x2.8 per 20 ms and is flagged at 0.48 s (README
+    per window: the laser arm at 0.2 ms grows x4.1 per 20 ms and is flagged at 0.46 s (README
     "Damping, time step and integrator")."""
 
     WINDOW = 20  # control periods (20 ms)

@@ -74,6 +74,7 @@ class LaserArm:
     encoder_step: float = 2 * math.pi / (4 * 1024 * 80)  # rad; rigs.md §1 [choice]
     noise_tip_sensor: float = 0.01  # V rms; rigs.md §3 [choice]
     noise_current: float = 0.004  # A rms; rigs.md §3 [choice]
+    hub_radius: float = 0.05  # m [ours] drawing: the hub a solid disc carrying hub_inertia
     n_segments: int = 11  # [ours] README "Discretisation": 3 modes within 1 %
     timestep: float = 1e-4  # s [ours] README "Time step": stable with beta ~ 1e-4 s
 
