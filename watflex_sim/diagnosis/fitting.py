@@ -173,12 +173,15 @@ def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None 
 
 
 def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps: int = 6,
-            first_step: float = 0.25) -> Model:
+            first_step: float = 0.25, resolution: float | None = None) -> Model:
     """Compass (pattern) search on the training cost from x0, for a cost that stick-slip makes rough:
     each sweep simulates every slot one step up and one down (2 x len(free) models, in parallel) and
     moves to the best if it lowers Huber's cost; a sweep that finds nothing halves the steps, which
     start at `first_step` x each slot's span. Levenberg-Marquardt's local model can stall there (a
-    few 0.1 % of inertia decide where a stick-slipping joint stops)."""
+    few 0.1 % of inertia decide where a stick-slipping joint stops). At most `sweeps` sweeps; with a
+    `resolution` (a cost change the data cannot resolve: 0.5 for a residual in noise units, one unit of
+    chi-square) it stops earlier, once no move changes the cost by that much: smaller steps would
+    find nothing the noise does not hide."""
     u, lo, hi = internal_start(free, x0)
     k = huber_threshold(r0)
     cost, step = huber_cost(r0, k), first_step * (hi - lo)
@@ -195,19 +198,22 @@ def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps:
         best = int(np.argmin(costs)) if costs else -1
         if best >= 0 and costs[best] < cost * (1 - 1e-3):
             u, cost = trials[best], costs[best]
+        elif resolution is not None and max((abs(c - cost) for c in costs), default=0.0) < resolution:
+            break
         else:
             step = step / 2
     return at_internal(u, free, base)
 
 
 def refit_parameters(data: Data, base: Model, runner=None, J: np.ndarray | None = None, iters: int = 4) -> Model:
-    """Refit the rig's parameters within their tolerances (rigs.md section 4) on the training data."""
+    """Refit the rig's parameters within their tolerances (rigs.md section 4) on the training data, in noise
+    units as the diagnosis does (`J`, if given, in those units)."""
     free = rig_slots(data)
     if not free:
         return base
     if runner is None:
         hold(data)
-    model, _, _ = levenberg(evaluator(runner), base, free, [value_of(base, s) for s in free], J, iters)
+    model, _, _ = levenberg(evaluator(runner, unit="noise"), base, free, [value_of(base, s) for s in free], J, iters)
     return model
 
 

@@ -65,27 +65,28 @@ def held() -> Data:
     return _DATA
 
 
-def _residual(model: Model, part: str = "train") -> np.ndarray | None:
-    """Residual vector of `model` on a part ('train' or 'all') of this process' data; None if it diverged."""
+def _residual(model: Model, part: str = "train", unit: str = "spread") -> np.ndarray | None:
+    """Residual vector of `model` on a part ('train' or 'all') of this process' data, in `unit` (spread or
+    noise, data.residual_vector); None if it diverged."""
     sims = simulate_all(_DATA, model, part)
-    return None if sims is None else residual_vector(_DATA, sims, part)
+    return None if sims is None else residual_vector(_DATA, sims, part, unit=unit)
 
 
 def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
-    """The residual of recording i alone on a part (a piece of _residual) for each job (model, i, part),
+    """The residual of recording i alone on a part (a piece of _residual) for each job (model, i, part, unit),
     all simulated in lockstep; None for a job whose simulation diverged."""
-    todo = [k for k, (_m, i, part) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
+    todo = [k for k, (_m, i, part, _u) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
     sims = resimulate_many([(_DATA.recordings[jobs[k][1]], jobs[k][0].effects, jobs[k][0].parameters,
                              last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]))
                             for k in todo], nthread, _DATA.rig)
     out: list = [np.zeros(0)] * len(jobs)
     for k, sim in zip(todo, sims):
-        _m, i, part = jobs[k]
+        _m, i, part, unit = jobs[k]
         if isinstance(sim, SimulationError):
             out[k] = None
             continue
         recs = [sim if j == i else r for j, r in enumerate(_DATA.recordings)]  # the others give zeros
-        out[k] = residual_vector(_DATA, recs, part, only=i)
+        out[k] = residual_vector(_DATA, recs, part, only=i, unit=unit)
     return out
 
 
@@ -153,15 +154,16 @@ class Runner:
         self.close(abort=kind is not None)
 
 
-def evaluator(runner: Runner | None, part: str = "train"):
-    """models -> residual vectors on a part ('train': what fits minimise; 'all': the final refit), in
-    the pool (one job per model and recording) or in this process."""
+def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread"):
+    """models -> residual vectors on a part ('train': what fits minimise; 'all': the final refit) in `unit`
+    ('spread', or 'noise': the refit of the rig's parameters), in the pool (one job per model and
+    recording) or in this process. The workers' noise is the data's when the Runner started."""
     if runner is None:
-        return lambda models: [_residual(m, part) for m in models]
+        return lambda models: [_residual(m, part, unit) for m in models]
 
     def evaluate(models):
         n = len(runner.data.recordings)
-        pieces = runner.lockstep(_pieces, [(m, i, part) for m in models for i in range(n)])
+        pieces = runner.lockstep(_pieces, [(m, i, part, unit) for m in models for i in range(n)])
         out = []
         for k in range(len(models)):
             mine = pieces[k * n:(k + 1) * n]
