@@ -54,6 +54,8 @@ def refit_only(recordings: list[Recording], names: list[str]) -> dict:
     model = diagnose.refit_parameters(data, diagnose.Model())
     sims = diagnose.simulate_all(data, model)
     score = lambda s, part: diagnose.fit_scores(data, s, part)["nrmse"]  # noqa: E731
+    if score(sims, "held_out") > score(nominal, "held_out"):  # as the diagnosis: a refit (fitted in noise
+        model, sims = diagnose.Model(), nominal  # units) must not make validation worse, here in NRMSE
     return {"effect": None,
             "held_out": {"before": score(nominal, "held_out"), "after": score(sims, "held_out")},
             "train": {"before": score(nominal, "train"), "after": score(sims, "train")},
