@@ -340,10 +340,7 @@ def _geom(body, name: str, kind, size: list[float], mass: float, rgba):
 
 def _bar(body, name: str, length: float, width: float) -> None:
     """A massless drawing of a link, `width` m wide."""
-    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[length / 2, width / 2, 0.005], pos=[length / 2, 0, 0])
-    g.contype = g.conaffinity = 0
-    g.mass = 0.0
-    g.rgba = BEAM_RGBA
+    _geom(body, name, mujoco.mjtGeom.mjGEOM_BOX, [length / 2, width / 2, 0.005], 0.0, BEAM_RGBA).pos = [length / 2, 0, 0]
 
 
 def n_segments(stages: list[dict], n: int) -> int:

@@ -340,12 +340,16 @@ def _check_header(header: list[str], rig: str, source) -> None:
     _check_names([h for h in header if h != "time" and not h.startswith(IGNORED)], rig, source)
 
 
-def _rows(f, delimiter: str | None):
-    """(line number, cells) of a text file's lines: csv.reader for a delimiter, else split at spaces."""
+def _rows(f, delimiter: str | None, source):
+    """(line number, cells) of a text file's lines: csv.reader for a delimiter, else split at spaces;
+    RecordingError at the line the CSV parser stops on."""
     if delimiter is not None:
         reader = csv.reader(f, strict=True, delimiter=delimiter)
-        for row in reader:
-            yield reader.line_num, row
+        try:
+            for row in reader:
+                yield reader.line_num, row
+        except csv.Error as err:
+            raise RecordingError(source, f"malformed CSV at line {reader.line_num}: {err}") from None
     else:
         for n, line in enumerate(f, 1):
             yield n, line.split()
@@ -354,10 +358,10 @@ def _rows(f, delimiter: str | None):
 def _read_csv_lines(path: Path, rig: str, source):
     """Parse the text line by line, stopping at the first bad line; return (time, channels, where)."""
     raw_header, _, delimiter = _csv_header(path, source)
-    header, rows, lines, n = None, [], [], 0
+    header, rows, lines = None, [], []
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
-            for n, row in _rows(f, delimiter):
+            for n, row in _rows(f, delimiter, source):
                 if not row or (len(row) == 1 and not row[0].strip()) or row[0].lstrip().startswith(COMMENTS):
                     continue  # blank or comment line
                 if header is None:
@@ -373,8 +377,6 @@ def _read_csv_lines(path: Path, rig: str, source):
                                                  f"{_show(row[bad[0]])} is not a number")
                 rows.append([float(c) if c else np.nan for c in cells])
                 lines.append(n)
-    except csv.Error as err:
-        raise RecordingError(source, f"malformed CSV at line {n + 1}: {err}") from None
     except UnicodeDecodeError as err:
         raise RecordingError(source, f"not UTF-8 text (byte {err.start} of a block)") from None
     if header is None:

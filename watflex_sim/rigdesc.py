@@ -23,7 +23,7 @@ import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from itertools import chain
 from pathlib import Path
 
@@ -123,7 +123,13 @@ class RigDescription:
         actuator = self.channels[channel].get("actuator")
         if self.sensors != "generic" or actuator is None:
             return gain
-        return gain * _actuator_gains(self.source, _version(Path(self.source)))[str(actuator)]
+        return gain * self._actuator_gains[str(actuator)]
+
+    @cached_property
+    def _actuator_gains(self) -> dict[str, float]:
+        """actuator -> |gain| (force or torque per input) in the rig's nominal model, compiled once."""
+        model = self.spec().compile()
+        return {model.actuator(i).name: abs(float(model.actuator_gainprm[i, 0])) for i in range(model.nu)}
 
     def make_sensors(self, model: mujoco.MjModel, data: mujoco.MjData, scenario: dict, period: float):
         """The rig's sensors and actuators on (model, data) (rigs.py): the generic ones read the
@@ -158,13 +164,6 @@ class RigDescription:
         if self.model in BUILDERS and self.model in RIGS:
             return BUILDERS[self.model](RIGS[self.model])
         raise ConfigError(f"{self.source}: model: no file {path}")
-
-
-@cache
-def _actuator_gains(source: str, version: int) -> dict[str, float]:
-    """actuator -> |gain| (force or torque per input) in the nominal model of the rig file `source` (at `version`)."""
-    model = load_rig(source).spec().compile()
-    return {model.actuator(i).name: abs(float(model.actuator_gainprm[i, 0])) for i in range(model.nu)}
 
 
 def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
