@@ -443,10 +443,13 @@ def run_pool(tasks: Iterator[list[dict]], workers: int, on_row: Callable[[dict],
             conn.close()
 
 
-def run_ray(tasks: Iterator[dict], address: str, on_row: Callable[[dict], None], workers: int | None = None) -> None:
-    """Run tasks as Ray tasks of one CPU on the cluster at `address` ('auto', 'local' or host:port;
-    a Ray already initialised in this process is used as it is). A task whose worker dies is
-    retried once, then recorded as 'crashed'. Workers must be able to import watflex_sim."""
+def run_ray(tasks: Iterator[dict], address: str, on_row: Callable[[dict], None], workers: int | None = None,
+            to_do: int = 1) -> None:
+    """Run `to_do` tasks in chunks as Ray tasks of one CPU on the cluster at `address` ('auto', 'local'
+    or host:port; a Ray already initialised in this process is used as it is), each chunk in lockstep
+    (run_many, as a local worker does; at least 4 chunks per CPU, at most LOCKSTEP runs each). A chunk
+    whose worker dies is retried once, then each of its runs is recorded as 'crashed'. Workers must be
+    able to import watflex_sim."""
     import ray
 
     started = not ray.is_initialized()
@@ -456,21 +459,24 @@ def run_ray(tasks: Iterator[dict], address: str, on_row: Callable[[dict], None],
                      include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
         except (ConnectionError, ValueError, RuntimeError) as exc:
             raise ConfigError(f"cannot start or reach Ray at {address!r}: {exc}".replace("\n", " ")) from None
-    remote = ray.remote(num_cpus=1, max_retries=1)(run_one)
-    limit = max(2, 2 * int(ray.cluster_resources().get("CPU", 1)))  # tasks in flight
-    pending, tasks = {}, iter(tasks)
+    remote = ray.remote(num_cpus=1, max_retries=1)(run_many)
+    cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    limit = max(2, 2 * cpus)  # chunks in flight
+    pending, tasks = {}, chunks(tasks, min(LOCKSTEP, -(-to_do // (4 * cpus))))
     try:
         while True:
-            while len(pending) < limit and (task := next(tasks, None)) is not None:
-                pending[remote.remote(task)] = task
+            while len(pending) < limit and (chunk := next(tasks, None)) is not None:
+                pending[remote.remote(chunk)] = chunk
             if not pending:
                 return
             for ref in ray.wait(list(pending), num_returns=1)[0]:
-                task = pending.pop(ref)
+                chunk = pending.pop(ref)
                 try:
-                    on_row(ray.get(ref))
+                    rows = ray.get(ref)
                 except ray.exceptions.RayError as exc:
-                    on_row(_row(task, "crashed", " ".join(str(exc).split())[:500]))
+                    rows = [_row(task, "crashed", " ".join(str(exc).split())[:500]) for task in chunk]
+                for row in rows:
+                    on_row(row)
     finally:
         for ref in pending:
             ray.cancel(ref, force=True)
@@ -630,7 +636,7 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
     journal, complete = open(journal_path, "a"), False
     try:
         if to_do and ray_address:
-            run_ray(tasks(), ray_address, on_row, workers)
+            run_ray(tasks(), ray_address, on_row, workers, to_do)
         elif to_do:
             n = min(workers or cores(), to_do)
             run_pool(chunks(tasks(), min(LOCKSTEP, -(-to_do // (4 * n)))), n, on_row)  # >= 4 chunks a worker
