@@ -82,6 +82,7 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
         match = next((f for f in report["findings"] if f["effect"] == truth_effect), None)
         if match:
             row["error"] = parameter_error(truth_effect, case["parameters"], match["parameters"])
+            row["found"] = {"true": case["parameters"], "found": match["parameters"], "intervals": match.get("intervals", {})}
             row["covered"] = [lo <= case["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
                               if k in case["parameters"]]
     proposal = report.get("proposed_experiment") or {}

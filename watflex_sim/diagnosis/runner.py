@@ -128,6 +128,13 @@ class Runner:
         sims = self.lockstep(_simulate_some, [(model, i, noise_seed) for i in range(len(self.data.recordings))])
         return None if any(s is None for s in sims) else sims
 
+    def simulate_seeds(self, model: Model, seeds: list[int]) -> list[list[Recording] | None]:
+        """`simulate` with the noise on, once per seed, all in one lockstep call."""
+        n = len(self.data.recordings)
+        sims = self.lockstep(_simulate_some, [(model, i, seed) for seed in seeds for i in range(n)])
+        return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]
+                for k in range(len(seeds))]
+
     def lockstep(self, fn, jobs: list) -> list:
         """fn(jobs share) -> a result per job, over one share per worker (here: one, on all threads)."""
         if self.pool is None or len(jobs) <= 1:
