@@ -388,7 +388,8 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     A quantised parameter (a delay) is good to half its step. The Jacobian's interval is over every
     effect parameter and rig parameter together, those at a bound too (a friction side near 0 that
     trades off with a viscous term widens it), the rig's with their tolerance as a prior (+-2 sd).
-    The Jacobian and the residual are in final_refit's noise units, and REPLICATES simulations of the
+    The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
+    the final model's simulations, where larger), and REPLICATES simulations of the
     final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
     which way (`fitting.intervals`): in closed loop, noise fed back moves the rig, which no white-noise
     interval describes. It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the
