@@ -341,8 +341,10 @@ def run_many(tasks: list[dict], nthread: int = 1) -> list[dict]:
     return rows
 
 
-def chunks(tasks: Iterator[dict], size: int) -> Iterator[list[dict]]:
-    """Tasks in lists of `size` (the last one shorter): the unit a worker steps in lockstep."""
+def chunks(tasks: Iterator[dict], to_do: int, workers: int) -> Iterator[list[dict]]:
+    """`to_do` tasks in lists, the unit a worker steps in lockstep: at least 4 per worker (so the pool
+    stays busy to the end), at most LOCKSTEP runs each (the last one shorter)."""
+    size = min(LOCKSTEP, -(-to_do // (4 * workers)))
     chunk: list[dict] = []
     for task in tasks:
         chunk.append(task)
@@ -462,7 +464,7 @@ def run_ray(tasks: Iterator[dict], address: str, on_row: Callable[[dict], None],
     remote = ray.remote(num_cpus=1, max_retries=1)(run_many)
     cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
     limit = max(2, 2 * cpus)  # chunks in flight
-    pending, tasks = {}, chunks(tasks, min(LOCKSTEP, -(-to_do // (4 * cpus))))
+    pending, tasks = {}, chunks(tasks, to_do, cpus)
     try:
         while True:
             while len(pending) < limit and (chunk := next(tasks, None)) is not None:
@@ -639,7 +641,7 @@ def run_sweep(sweep: Sweep | str | Path, out, workers: int | None = None, ray_ad
             run_ray(tasks(), ray_address, on_row, workers, to_do)
         elif to_do:
             n = min(workers or cores(), to_do)
-            run_pool(chunks(tasks(), min(LOCKSTEP, -(-to_do // (4 * n)))), n, on_row)  # >= 4 chunks a worker
+            run_pool(chunks(tasks(), to_do, n), n, on_row)
         complete = True
     finally:
         journal.flush()

@@ -182,7 +182,7 @@ def unit_change(data: Data, part: str = "train", stride: int = STRIDE, sims: lis
     RMS residual of `sims` there (weighted least squares with each channel's variance estimated: where
     a model is far above the noise, its own misfit, not the noise, is what a channel's residual scatters
     by; on EMPS, current at 22x its noise and position near it, noise weights put the dry-friction bias
-    6.8 % from Janot's, these 4.7 %).
+    6.8 % from Janot's, these 4.2 %).
 
     Why the refit is in noise units (issue 14): in spread units every channel counts by its NRMSE, so
     the cost of a model within the noise is mostly the noise of the noisiest channels relative to their
@@ -197,12 +197,8 @@ def unit_change(data: Data, part: str = "train", stride: int = STRIDE, sims: lis
             continue
         n = np.flatnonzero(mask)[::stride].size
         for c in chans:
-            unit = noise[c]
-            if sims is not None:
-                r = (sims[i].channels[c] - rec.channels[c])[mask]
-                r = r[np.isfinite(r)]
-                unit = max(unit, float(np.sqrt(np.mean(r**2)))) if r.size else unit
-            pieces.append(np.full(n, unit / scale[c]))
+            misfit = None if sims is None else rms_residual(rec, sims[i], c, mask)
+            pieces.append(np.full(n, max(noise[c], misfit or 0.0) / scale[c]))
     return np.concatenate(pieces) if pieces else np.zeros(1)
 
 
@@ -212,11 +208,18 @@ def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list
     for rec, sim, name, chans, noise, train in zip(data.recordings, sims, data.names, data.channels, data.noise, data.train):
         mask = in_part(train, part)
         for c in chans:
-            r = (sim.channels[c] - rec.channels[c])[mask]
-            r = r[np.isfinite(r)]
-            if r.size >= 10:
-                out.append({"recording": name, "channel": c, "ratio": float(np.sqrt(np.mean(r**2))) / noise[c]})
+            rms = rms_residual(rec, sim, c, mask, least=10)
+            if rms is not None:
+                out.append({"recording": name, "channel": c, "ratio": rms / noise[c]})
     return out
+
+
+def rms_residual(rec: Recording, sim: Recording, channel: str, mask: np.ndarray, least: int = 1) -> float | None:
+    """RMS of simulated - measured on `channel` over `mask`'s finite samples (the channel's unit); None
+    with fewer than `least` of them."""
+    r = (sim.channels[channel] - rec.channels[channel])[mask]
+    r = r[np.isfinite(r)]
+    return float(np.sqrt(np.mean(r**2))) if r.size >= max(least, 1) else None
 
 
 def noise_ratio(data: Data, sims: list[Recording] | None, part: str = "all") -> float:

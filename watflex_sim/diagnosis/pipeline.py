@@ -364,22 +364,21 @@ def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], s
 
 def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording]]:
     """The chosen model's parameters (its effects' and the rig's) refit on all the data, training and
-    validation blocks alike, in noise units (`in_noise`): the structure was chosen and judged on data the
+    validation blocks alike, in noise units (`in_units`): the structure was chosen and judged on data the
     fit did not see; the numbers reported are then estimated from every sample, each channel weighted by
     its noise, or by its misfit where the model is further off than that (what least squares needs to
     be the best estimate). Kept only if it does not diverge."""
     free = effect_slots_of(data, model) + rig_slots(data)
-    refit, _, _ = levenberg(in_noise(evaluator(runner, "all"), data, "all", sims), model, free,
+    refit, _, _ = levenberg(in_units(evaluator(runner, "all"), unit_change(data, "all", sims=sims)), model, free,
                             [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
     new = runner.simulate(refit)
     return (refit, new) if new is not None else (model, sims)
 
 
-def in_noise(evaluate, data: Data, part: str, sims: list[Recording] | None = None):
-    """An evaluator of residuals in spread units turned to this process' noise units: the closed-loop
-    noise floor (add_closed_loop_noise), which the workers' copies of the data lack; with `sims`, a
-    channel's unit is its misfit there where that is larger than its noise (`unit_change`)."""
-    per = unit_change(data, part, sims=sims)
+def in_units(evaluate, per: np.ndarray):
+    """An evaluator of residuals in spread units turned to the units `per` (`unit_change`, computed in
+    this process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
+    copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
     return lambda models: [None if r is None else r / per for r in evaluate(models)]
 
 
@@ -405,7 +404,7 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
         return out
     slots = effect_slots_of(data, model) + rig_slots(data)
     per = unit_change(data, "all", sims=sims)  # the units final_refit fits in
-    evaluate = in_noise(evaluator(runner, "all"), data, "all", sims)
+    evaluate = in_units(evaluator(runner, "all"), per)
     r = evaluate([model])[0]
     if r is None:
         return out

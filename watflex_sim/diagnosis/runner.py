@@ -125,11 +125,10 @@ class Runner:
     def simulate(self, model: Model, noise_seed: int | None = None) -> list[Recording] | None:
         """Every recording re-simulated with `model` (in lockstep; with `noise_seed` the rig's
         measurement noise on); None if one diverged."""
-        sims = self.lockstep(_simulate_some, [(model, i, noise_seed) for i in range(len(self.data.recordings))])
-        return None if any(s is None for s in sims) else sims
+        return self.simulate_seeds(model, [noise_seed])[0]
 
-    def simulate_seeds(self, model: Model, seeds: list[int]) -> list[list[Recording] | None]:
-        """`simulate` with the noise on, once per seed, all in one lockstep call."""
+    def simulate_seeds(self, model: Model, seeds: list[int | None]) -> list[list[Recording] | None]:
+        """`simulate` once per noise seed (None: noise off), all in one lockstep call."""
         n = len(self.data.recordings)
         sims = self.lockstep(_simulate_some, [(model, i, seed) for seed in seeds for i in range(n)])
         return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]
