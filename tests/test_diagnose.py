@@ -194,6 +194,25 @@ def test_shortlist_fits_screening_ties_too():
     assert shortlist(ranked(0.0, 0.0)) == []
 
 
+def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
+    """shortlist(): a linear signature under-rates stick-slip, so the best-screening candidate at the
+    leader's place with fewer parameters is fitted too (seed-5 laser case: Coulomb friction, 2
+    parameters, screened 21 % against Stribeck's 41 %, 3 parameters, and fitted better), if it screens at
+    least MIN_GAIN per parameter; never one at another place, never more than one."""
+    from watflex_sim.diagnosis import Candidate, shortlist
+
+    def cand(effect, where, n, gain):
+        return Candidate(effect, where, {}, {f"p{i}": None for i in range(n)}, {}, gain=gain)
+
+    stribeck, position = cand("stribeck", "hub", 3, 0.41), cand("position", "hub", 4, 0.36)
+    coulomb, viscous = cand("coulomb", "hub", 2, 0.21), cand("viscous", "hub", 2, 0.20)
+    elsewhere = cand("offset", "tip", 1, 0.30)
+    names = [c.effect for c in shortlist([stribeck, position, elsewhere, coulomb, viscous])]
+    assert names == ["stribeck", "position", "coulomb"]
+    assert [c.effect for c in shortlist([stribeck, position, cand("coulomb", "hub", 2, 0.039)])] == ["stribeck", "position"]
+    assert [c.effect for c in shortlist([coulomb, stribeck, position])] == ["coulomb", "stribeck"]
+
+
 def test_a_delay_is_searched_in_whole_control_periods():
     """step_search(): a delay acts in whole 1 ms ticks (effects.delay), so its residual has no
     gradient; from a linear estimate of 2.4 ms the search tries 1-4 ms and keeps the 3 ms whose

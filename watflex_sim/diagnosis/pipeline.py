@@ -25,10 +25,9 @@ from .explain import finding, units_at
 from .fitting import Slot, compass, intervals, jacobian, levenberg, rig_slots, unpack, value_of
 from .locate import locate
 from .runner import Runner, evaluator
-from .screening import (FIT_ITERATIONS, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
+from .screening import (FIT_ITERATIONS, MIN_GAIN, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
                         make_candidate, screen, scored, shortlist, signatures)
 
-MIN_GAIN = 0.02  # training noise ratio must fall by this fraction per fitted parameter, at least
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
 MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
