@@ -6,6 +6,7 @@ Fc = 20.3935 N, offset = -3.1648 N (IDIM-LS). Our actuator_offset is added to th
 command in the plant (V), so offset_N = -offset_V x gtau.
 """
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -215,18 +216,39 @@ def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
 
 def test_a_delay_is_searched_in_whole_control_periods():
     """step_search(): a delay acts in whole 1 ms ticks (effects.delay), so its residual has no
-    gradient; from a linear estimate of 2.4 ms the search tries 1-4 ms and keeps the 3 ms whose
-    residual vanishes, never the neutral 0 ms."""
+    gradient; from a linear estimate of 2.4 ms the search keeps the 3 ms whose residual vanishes,
+    never the neutral 0 ms. A linear estimate falls short of a long delay (seed 5: 7 ms estimated for
+    11 ms, found at the end of a +-2 step grid, 9 ms), and a closed loop's residual is not convex in
+    its delay (seed 5, laser_arm-f950c686, training sum of squares at nominal parameters for a
+    tip-sensor delay of 1-6 ms: 2064, 2023, 2052, 2164, 147, 178, the estimate 2 ms): the search also
+    tries a ladder of steps up to the slot's bound and refines around the best; without the ladder
+    (the search again after a fit) it stays near its start."""
     from watflex_sim.diagnosis import Candidate, Model, Slot, step_search
 
+    seed5 = {1: 2064.0, 2: 2023.0, 3: 2052.0, 4: 2164.0, 5: 147.0, 6: 178.0}
+    truth = {"ticks": 3}
+    tried = []
+
     def evaluate(models):
-        return [np.full(5, round(m.effects[-1]["seconds"] / 1e-3) - 3.0) for m in models]
+        ticks = [round(m.effects[-1]["seconds"] / 1e-3) for m in models]
+        tried.extend(ticks)
+        if truth["ticks"] == "seed5":
+            return [np.full(1, math.sqrt(seed5.get(k, 2500.0))) for k in ticks]
+        return [np.full(5, k - truth["ticks"]) for k in ticks]
 
     cand = Candidate("delay", "tip_sensor", {"seconds": 1e-3}, {"seconds": Slot(("effect", -1, "seconds"), 0.0, 0.05)},
                      {"seconds": 0.0}, estimate={"seconds": 2.4e-3}, quanta={"seconds": 1e-3})
     assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(3e-3)
+    assert 0 not in tried and max(tried) <= 50
     cand.estimate["seconds"] = 0.0  # an estimate at neutral still tries a delay
-    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(2e-3)
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(3e-3)
+    truth["ticks"], cand.estimate["seconds"] = 11, 7e-3
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(11e-3)
+    truth["ticks"] = 80  # beyond the slot's 50 ms: the bound
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(50e-3)
+    truth["ticks"], cand.estimate["seconds"] = "seed5", 2e-3
+    assert step_search(evaluate, cand, Model())["seconds"] == pytest.approx(5e-3)
+    assert step_search(evaluate, cand, Model(), ladder=False)["seconds"] == pytest.approx(2e-3)
 
 
 def test_clean_recordings_with_parameter_error_are_nothing_missing():

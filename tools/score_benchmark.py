@@ -20,7 +20,7 @@ Parameter error of a finding that names the right effect: for each true paramete
 |found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
 for a parameter whose true value is neutral, e.g. the zero side of a one-direction friction,
 relative to the largest true deviation of the effect); the case's error is the mean over them.
-Results are also written to BENCH_DIR/score.json.
+Results are also written to BENCH_DIR/score.json, each case's whole report to BENCH_DIR/reports/ID.json.
 """
 from __future__ import annotations
 
@@ -62,6 +62,9 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     start = time.perf_counter()
     report = diagnose(recordings, names, workers=workers)
     seconds = time.perf_counter() - start
+    (root / "reports").mkdir(exist_ok=True)  # what the diagnosis said, whole, for a look at a miss afterwards
+    (root / "reports" / f"{case['id']}.json").write_text(
+        json.dumps({k: v for k, v in report.items() if k != "sims"}, indent=1, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)) + "\n")
     first = report["findings"][0] if report["findings"] else None
     kind = case.get("kind", "clean" if case["effect"] is None else "effect")
     truth_effect = case["effect"] or NONE

@@ -234,23 +234,29 @@ def _mean_ratio(ratios: list[dict]) -> float:
     return float(np.mean([r["ratio"] for r in ratios])) if ratios else 0.0
 
 
+def typical_ratios(ratios: list[dict]) -> dict[str, float]:
+    """Per channel, the median over recordings of RMS residual / noise, from `channel_ratios`."""
+    per: dict[str, list[float]] = {}
+    for r in ratios:
+        per.setdefault(r["channel"], []).append(r["ratio"])
+    return {c: float(np.median(v)) for c, v in per.items()}
+
+
 def worst_channel(ratios: list[dict]) -> tuple[str, float]:
     """The channel furthest above its noise, and its ratio, from `channel_ratios`: the median over
     recordings of RMS residual / noise. A mean over channels hides one channel left unexplained (a motor
     current 1.5x its noise in every recording); the median over recordings does not count one recording
     where a stick-slipping joint stopped elsewhere (a clean Watflex case: 2.8x in one step, 0.6-0.9x in two)."""
-    per: dict[str, list[float]] = {}
-    for r in ratios:
-        per.setdefault(r["channel"], []).append(r["ratio"])
-    typical = {c: float(np.median(v)) for c, v in per.items()}
-    return max(typical.items(), key=lambda cv: cv[1], default=("", 0.0))
+    return max(typical_ratios(ratios).items(), key=lambda cv: cv[1], default=("", 0.0))
 
 
 def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> dict:
-    """Mean NRMSE and correlation over channels and recordings (recordings.md), the noise ratio and the
-    channel furthest above its noise (`worst_channel`, `worst_ratio`), on a part."""
+    """Mean NRMSE and correlation over channels and recordings (recordings.md), the noise ratio, each
+    channel's (`channel_ratios`, typical_ratios) and the channel furthest above its noise (`worst_channel`,
+    `worst_ratio`), on a part."""
     if sims is None:
-        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf, "worst_channel": "", "worst_ratio": math.inf}
+        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf, "worst_channel": "", "worst_ratio": math.inf,
+                "channel_ratios": {}}
     errors, corrs = [], []
     for rec, sim, chans, train in zip(data.recordings, sims, data.channels, data.train):
         mask = in_part(train, part)
@@ -262,7 +268,8 @@ def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> d
     ratios = channel_ratios(data, sims, part)
     worst, ratio = worst_channel(ratios)
     return {"nrmse": float(np.nanmean(errors)), "correlation": float(np.nanmean(corrs)),
-            "noise_ratio": _mean_ratio(ratios), "worst_channel": worst, "worst_ratio": ratio}
+            "noise_ratio": _mean_ratio(ratios), "worst_channel": worst, "worst_ratio": ratio,
+            "channel_ratios": typical_ratios(ratios)}
 
 
 def noise_nrmse(data: Data, part: str = "all") -> float:

@@ -116,8 +116,8 @@ def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list
         "intervals": {**intervals, **extra_intervals},
         "explanation": explain(name, place, {**params, **extra}, {**units, **extra_units}),
         "evidence": (f"residual: {evidence}. " if evidence else "")
-        + f"With it: training NRMSE {s['train_before']:.4f} -> {s['train_after']:.4f}, validation "
+        + f"With the findings: training NRMSE {s['train_before']:.4f} -> {s['train_after']:.4f}, validation "
           f"{s['held_before']:.4f} -> {s['held_after']:.4f} ({s['ratio_before']:.2f} -> {s['ratio_after']:.2f} x the noise); "
-          f"without it in the final model validation would be {s['ablated']:.2f} x the noise.",
-        "delta_fit": s["held_before"] - s["held_after"],
+          f"without this one in the final model validation would be {s['held_without']:.4f} ({s['ablated']:.2f} x the noise).",
+        "delta_fit": s["held_without"] - s["held_after"],  # validation NRMSE this finding removes from the final model
     }

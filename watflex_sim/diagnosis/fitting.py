@@ -72,6 +72,17 @@ def internal_start(free: list[Slot], x0) -> tuple[np.ndarray, np.ndarray, np.nda
     return np.clip([s.to_internal(x) for s, x in zip(free, x0)], lo, hi), lo, hi
 
 
+def refit_cost(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """Sum of squares of the residual r once the slots of Jacobian J (internal units, at u, bounds lo..hi)
+    are re-optimised to first order: min over the bounded step d of |r + J d|^2."""
+    if J.shape[1] == 0:
+        return float(r @ r)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    A = J * span
+    z = lsq_linear(A, -r, bounds=((lo - u) / span, np.maximum(hi - u, lo - u + 1e-12) / span)).x
+    return float(np.sum((r + A @ z) ** 2))
+
+
 def value_of(model: Model, slot: Slot) -> float:
     if slot.where[0] == "param":
         return model.parameters.get(slot.where[1], 1.0)
