@@ -120,6 +120,14 @@ def _earns_place(result: dict, later: bool) -> bool:
             and (not later or result["excess_gain"] >= MIN_EXCESS_GAIN))
 
 
+def _why_not(result: dict) -> str:
+    """Which test of _earns_place a fitted candidate failed, in words."""
+    if result["train_gain"] < MIN_GAIN * result["n_params"] or result["held_gain"] < MIN_HELD_GAIN:
+        return "less than its parameters' cost"
+    return (f"removes only {100 * result['excess_gain']:.0f} % of what validation has above the noise where another round "
+            f"was asked for (a later finding must remove {100 * MIN_EXCESS_GAIN:.0f} %)")
+
+
 def explained_share(before: float, after: float) -> float:
     """Share of the residual above the noise (noise ratio - 1) that a model removes."""
     return (before - after) / max(before - 1.0, 1e-9) if before > 1.0 else 1.0
@@ -225,7 +233,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
         if not _earns_place(best, later):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
-                             "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"]})
+                             "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"],
+                             "parameters": best["n_params"], "why": _why_not(best)})
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
