@@ -354,7 +354,7 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     column for both, the effect's 95 % interval is its ratio x exp(+-1.96 sd / e), sd = 0.02 / sqrt 3 (the
     tolerance prior, uniform), however precise the data. Finite differences of unequal steps had made the
     pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %)."""
-    from watflex_sim.diagnosis.pipeline import tie_knob_columns
+    from watflex_sim.diagnosis.pipeline import tie_knob_columns, tolerance_sd
     from watflex_sim.diagnosis.screening import effect_slots_of
     from watflex_sim.diagnosis.fitting import rig_slots
 
@@ -368,7 +368,7 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     scale = 1.0 if slots[i].log else 1.3
     assert np.allclose(tied[:, j], J[:, i] * scale / 1.02) and np.array_equal(np.delete(tied, j, 1), np.delete(J, j, 1))
     r = 1e-4 * rng.normal(size=400)  # precise data
-    prior = [s.span() / 2 / math.sqrt(3) if s.where[0] == "param" else math.inf for s in slots]
+    prior = [tolerance_sd(s) for s in slots]
     low, high = intervals(slots, model, tied, r, prior)[i]
     sd = 0.02 / math.sqrt(3) / 1.02
     expected = (1.3 * math.exp(-1.96 * sd), 1.3 * math.exp(1.96 * sd)) if slots[i].log else (1.3 * (1 - 1.96 * sd), 1.3 * (1 + 1.96 * sd))

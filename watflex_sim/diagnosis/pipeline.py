@@ -112,20 +112,21 @@ def excess_gain(held_now: dict, held_new: dict) -> float:
 
 
 def _earns_place(result: dict, later: bool) -> bool:
-    """Training better by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one
-    is in already) must also remove MIN_EXCESS_GAIN of what validation still has above the noise
-    (excess_gain), so a second effect does not merely absorb the first one's imperfect fit (stick-slip
-    fits are approximate)."""
-    return (result["train_gain"] >= MIN_GAIN * result["n_params"] and result["held_gain"] >= MIN_HELD_GAIN
-            and (not later or result["excess_gain"] >= MIN_EXCESS_GAIN))
+    """Whether a fitted candidate earns its place (_shortfall says nothing against it)."""
+    return not _shortfall(result, later)
 
 
-def _why_not(result: dict) -> str:
-    """Which test of _earns_place a fitted candidate failed, in words."""
+def _shortfall(result: dict, later: bool) -> str:
+    """Why a fitted candidate does not earn its place, in words, or "" if it does: training must be better
+    by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one is in already) must
+    also remove MIN_EXCESS_GAIN of what validation still has above the noise (excess_gain), so a second
+    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate)."""
     if result["train_gain"] < MIN_GAIN * result["n_params"] or result["held_gain"] < MIN_HELD_GAIN:
         return "less than its parameters' cost"
-    return (f"removes only {100 * result['excess_gain']:.0f} % of what validation has above the noise where another round "
-            f"was asked for (a later finding must remove {100 * MIN_EXCESS_GAIN:.0f} %)")
+    if later and result["excess_gain"] < MIN_EXCESS_GAIN:
+        return (f"removes only {100 * result['excess_gain']:.0f} % of what validation has above the noise where another "
+                f"round was asked for (a later finding must remove {100 * MIN_EXCESS_GAIN:.0f} %)")
+    return ""
 
 
 def explained_share(before: float, after: float) -> float:
@@ -234,7 +235,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         if not _earns_place(best, later):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"],
-                             "parameters": best["n_params"], "why": _why_not(best)})
+                             "why": _shortfall(best, later)})
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
@@ -385,8 +386,7 @@ def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], s
         for i in range(len(model.effects)):
             reduced = Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
             s = runner.simulate(reduced)
-            scores = fit_scores(data, s, "held_out") if s is not None else {"noise_ratio": math.inf, "nrmse": math.inf}
-            without.append((scores, reduced, s))
+            without.append((fit_scores(data, s, "held_out"), reduced, s))  # a diverging one scores inf
         worst = int(np.argmin([w[0]["noise_ratio"] for w in without]))
         if without[worst][0]["noise_ratio"] > held * (1 + MIN_HELD_GAIN):
             return model, sims, [w[0] for w in without]
@@ -413,6 +413,12 @@ def in_units(evaluate, per: np.ndarray):
     this process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
     copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
     return lambda models: [None if r is None else r / per for r in evaluate(models)]
+
+
+def tolerance_sd(slot: Slot) -> float:
+    """Prior sd (internal units) of a rig parameter's slot: a uniform spread over its +-tolerance has
+    sd tolerance / sqrt 3; inf (no prior) for an effect's parameter."""
+    return slot.span() / 2 / math.sqrt(3) if slot.where[0] == "param" else math.inf
 
 
 def tie_knob_columns(data: Data, model: Model, slots: list[Slot], J: np.ndarray) -> np.ndarray:
@@ -462,7 +468,7 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
         return out
     u = np.array([s.to_internal(value_of(model, s)) for s in slots])
     J = tie_knob_columns(data, model, slots, jacobian(evaluate, model, slots, u, r))
-    prior = [s.span() / 2 / math.sqrt(3) if s.where[0] == "param" else math.inf for s in slots]  # uniform within tolerance
+    prior = [tolerance_sd(s) for s in slots]
     noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
     replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
     for k, (low, high) in intervals(slots, model, J, r, prior, replicates).items():
