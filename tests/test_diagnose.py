@@ -195,6 +195,42 @@ def test_shortlist_fits_screening_ties_too():
     assert shortlist(ranked(0.0, 0.0)) == []
 
 
+def test_rescreen_checks_a_signature_by_simulating_its_estimate():
+    """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
+    larger share of the training cost removed (no rig parameters here, so the plain sum of squares).
+    Closed form: r(m) = r0 (1 - m / 0.4)^2 at m = 0.1 leaves 0.5625^2 of the cost (gain 0.684, half-way
+    0.414); r(m) = r0 (1 + m) at m = 1 and 0.5 leaves 4 x and 2.25 x (gains -3, -1.25)."""
+    from watflex_sim.diagnosis import Candidate, Model
+    from watflex_sim.diagnosis.screening import rescreen
+
+    r0 = np.ones(10)
+    law = {"closer": lambda m: r0 * (1 - m / 0.4) ** 2, "further": lambda m: r0 * (1 + m)}
+
+    def evaluate(models):
+        return [law[m.effects[-1]["effect"]](m.effects[-1]["m"]) for m in models]
+
+    closer = Candidate("closer", "x", {"m": 0.2}, {}, {"m": 0.0}, estimate={"m": 0.1}, gain=0.1)
+    further = Candidate("further", "x", {"m": 0.2}, {}, {"m": 0.0}, estimate={"m": 1.0}, gain=0.5)
+    rescreen(evaluate, [closer, further], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
+    assert closer.checked == pytest.approx(1 - 0.5625**2, rel=1e-12)
+    assert further.checked == pytest.approx(1 - 1.5**2, rel=1e-12)
+
+
+def test_shortlist_swaps_a_candidate_its_simulation_refutes():
+    """shortlist(): a candidate that rescreen found worse than no effect at all (checked < 0) gives its
+    place to the best one it found better that is not on the list (seed 11, an independent simulator's
+    0.33 kg Watflex payload: a link stiffness screened 14 % and simulated -25 %, the payload 12 % / 13 %)."""
+    from watflex_sim.diagnosis import Candidate, shortlist
+
+    def cand(effect, gain, checked):
+        return Candidate(effect, "x", {}, {}, {}, gain=gain, checked=checked)
+
+    gain, stiffness, limit = cand("gain", 0.33, 0.33), cand("stiffness", 0.14, -0.25), cand("limit", 0.13, -24.7)
+    payload, sensor = cand("payload", 0.12, 0.13), cand("sensor", 0.08, 0.08)
+    assert [c.effect for c in shortlist([gain, stiffness, limit, payload, sensor])] == ["gain", "payload"]
+    assert [c.effect for c in shortlist([gain, stiffness, cand("other", 0.1, None)])] == ["gain", "stiffness"]
+
+
 def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
     """shortlist(): a linear signature under-rates stick-slip, so the best-screening candidate at the
     leader's place with fewer parameters is fitted too (seed-5 laser case: Coulomb friction, 2

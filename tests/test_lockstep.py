@@ -91,3 +91,17 @@ def test_jittered_commands_match_single_runs(tmp_path, monkeypatch):
 
     make_rig(tmp_path, monkeypatch, "0.0015")
     _compare([scenario(tmp_path, [f"seed={s}"], duration=0.6) for s in (1, 2)])
+
+
+def test_a_model_that_cannot_be_built_fails_alone_in_a_resimulation_batch():
+    """resim.resimulate_many: a member whose effects make an impossible model (a payload 5 kg lighter than
+    the laser arm's 0 kg, as a diagnosis step beyond a slot's physical range can propose) gives its own
+    SimulationError; the member beside it is simulated as alone (identical channels)."""
+    from watflex_sim.resim import resimulate, resimulate_many
+
+    rec = simulate(load_scenario("laser_arm_step", ["duration_s=0.2", "payload_kg=0"])).recording
+    bad = [{"effect": "payload", "where": "tip", "mass": -5.0}]
+    failed, fine = resimulate_many([(rec, bad), (rec, [])], nthread=1)
+    assert isinstance(failed, SimulationError) and "cannot be built" in str(failed)
+    alone = resimulate(rec)
+    assert all(np.array_equal(fine.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels)

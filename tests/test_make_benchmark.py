@@ -215,3 +215,19 @@ def test_diverging_case_is_redrawn_then_skipped(tmp_path, monkeypatch, capsys):
     assert truth["cases"] == [] and truth["skipped"][-1]["effect"] == "payload"
     assert len(calls) == mb.MAX_DRAWS and len({c["mass"] for c in calls}) == mb.MAX_DRAWS
     assert "diverged" in capsys.readouterr().err
+
+
+def test_another_implementation_records_what_its_sidecars_do_not_tell(bench, tmp_path):
+    """--segments / --step-divisor: the same cases (same draws, same sidecars byte for byte) recorded by a
+    finer discretisation of the datasheet (30 segments, half the step), which the diagnosis is not told:
+    the clean laser case's tip-sensor recording differs from ours by more than a tenth of its noise."""
+    out, truth = bench
+    other = mb.make_cases(tmp_path, **{**ARGS, "effects": [], "rigs": ("laser_arm",)}, segments=30, step_divisor=2)
+    assert other["recorder"] == {"segments": 30, "step_divisor": 2} and truth["recorder"] == {"segments": 0, "step_divisor": 1}
+    (case,) = other["cases"]
+    assert case == next(c for c in truth["cases"] if c["id"] == case["id"])
+    for rel in case["recordings"]:
+        assert (tmp_path / rel).with_suffix(".json").read_bytes() == (out / rel).with_suffix(".json").read_bytes()
+        ours, theirs = read_recording(out / rel), read_recording(tmp_path / rel)
+        noise = load_rig("laser_arm").channels["tip_sensor"]["noise"]
+        assert np.max(np.abs(ours.channels["tip_sensor"] - theirs.channels["tip_sensor"])) > 0.1 * noise

@@ -1,7 +1,7 @@
 """Generate a public benchmark of concealed effects for `watflex-sim diagnose`.
 
 Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,watflex]
-           [--per-effect 1] [--clean 3] [--hard 2] [--effects a,b] [--duration 6]
+           [--per-effect 1] [--clean 3] [--hard 2] [--effects a,b] [--duration 6] [--segments 30 --step-divisor 2]
 
 A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
 rig with one catalogue effect added, listed in a shuffled order (the diagnosis must not depend on it):
@@ -18,6 +18,10 @@ rig's parameters perturbed within their tolerances. `--hard` cases per rig and k
     (link_stiffness_change, sensor_gain with a negative ratio);
   outside_catalogue: physics the catalogue does not have (a monitored sensor with a cubic
     nonlinearity, 30-60 % extra at its peak): the right answer is the verdict `unexplained`.
+
+`--segments N` / `--step-divisor K` record with another discretisation of the same datasheet (N segments per
+flexible part, a K x finer physics step), which the sidecars do not tell: what recordings from an independent
+implementation of rigs.md look like to ours (truth.json "recorder").
 
 Written: DIR/cases/<id>/<stem>.csv + .json (sidecars carry no effect, parameters or notes;
 case ids are opaque) and DIR/truth.json (the answers; schema in `make_cases`). DIR must not
@@ -45,6 +49,7 @@ import numpy as np  # noqa: E402
 
 from watflex_sim import SimulationError, check, load_scenario, simulate, write_recording  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
+from watflex_sim.model import load_model  # noqa: E402
 from watflex_sim.rigdesc import load_rig  # noqa: E402
 
 FORMAT = "flexarm-benchmark/1"
@@ -138,7 +143,8 @@ STIFFNESS_PLACE = {"laser_arm": "beam", "watflex": "link2"}
 CONCEALMENTS = ("closed loop", "one direction only", "mixed with parameter error", "small against noise",
                 "indirect channel")
 NEUTRAL_NOTES = "benchmark recording"
-DROPPED_SCENARIO_KEYS = ("effects", "parameters", "notes", "name")  # the truth never goes in a sidecar
+DROPPED_SCENARIO_KEYS = ("effects", "parameters", "notes", "name",  # the truth never goes in a sidecar,
+                         "n_segments", "timestep")  # nor the discretisation of the simulator that recorded it
 
 
 def _rng(seed: int, key: str) -> np.random.Generator:
@@ -170,9 +176,11 @@ def perturbed_parameters(rig: str, rng: np.random.Generator) -> dict[str, float]
             for name, p in load_rig(rig).parameters.items()}
 
 
-def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: bool = False) -> list[tuple[str, dict]]:
+def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: bool = False,
+                recorder: dict | None = None) -> list[tuple[str, dict]]:
     """The three recordings of a case as (stem, scenario without effects); with `rest_last` the third is
-    an experiment in which nothing moves (laser: a zero step; Watflex: the sub-break-away triangle)."""
+    an experiment in which nothing moves (laser: a zero step; Watflex: the sub-break-away triangle).
+    `recorder`: scenario keys of the simulator that records them (recorder_of)."""
     if rig == "laser_arm":
         third = float(rng.choice([0.0, 1.15]))  # kg: a paper payload besides the 0.7 kg of the steps
         plan = [("step_positive", "positive", 0.7), ("step_negative", "negative", 0.7),
@@ -196,7 +204,7 @@ def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: 
             sc = load_scenario("watflex_elbow_triangle")
         runs[-1] = ("at_rest", sc)
     for _, sc in runs:
-        sc.update(duration_s=float(duration), noise=True, seed=int(rng.integers(2**31)))
+        sc.update(duration_s=float(duration), noise=True, seed=int(rng.integers(2**31)), **(recorder or {}))
     return runs
 
 
@@ -247,16 +255,27 @@ def simulate_case(runs: list, effects: list, parameters: dict, drop: tuple = ())
     return out
 
 
-def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float) -> tuple[dict, list] | None:
+def recorder_of(rig: str, segments: int = 0, step_divisor: int = 1) -> dict:
+    """Scenario keys of a recording simulator other than ours, of the same datasheet: `segments` per
+    flexible part (0: ours) and a physics step `step_divisor` x finer. The diagnosis re-simulates with
+    its own (the sidecars do not say), as it would recordings from an independent implementation."""
+    out = {"n_segments": segments} if segments else {}
+    if step_divisor != 1:
+        out["timestep"] = load_model(rig).opt.timestep / step_divisor  # s
+    return out
+
+
+def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float,
+              recorder: dict | None = None) -> tuple[dict, list] | None:
     """One case: (truth entry without recordings, [(stem, Recording)]), or None if it always diverged.
 
-    `effect` None: a clean case (rig parameters perturbed within tolerance only)."""
+    `effect` None: a clean case (rig parameters perturbed within tolerance only). `recorder`: recorder_of."""
     key = f"{rig}/{effect or 'clean'}/{k}"
     rng = _rng(seed, key)
     kind = effect if effect in HARD_KINDS else ("clean" if effect is None else "effect")
     truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, kind=kind, effect=effect, where=None,
                  parameters={}, units={}, refit_parameters={}, concealment=None, duration_s=float(duration))
-    runs = experiments(rig, duration, rng, rest_last=kind == "clean_rest")
+    runs = experiments(rig, duration, rng, rest_last=kind == "clean_rest", recorder=recorder)
     if kind in HARD_KINDS:
         return make_hard_case(truth, rig, kind, runs, rng)
     if effect is None:
@@ -313,13 +332,15 @@ def make_hard_case(truth: dict, rig: str, kind: str, runs: list, rng: np.random.
 
 
 def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
-               duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0) -> dict:
+               duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0,
+               segments: int = 0, step_divisor: int = 1) -> dict:
     """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
+    `segments`, `step_divisor`: the recording simulator's discretisation (recorder_of; default ours).
 
     truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean or one of
     HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
     "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s"}],
-    "skipped": [{"rig", "effect", "why"}]}. `effects` None: the whole catalogue.
+    "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}}. `effects` None: the whole catalogue.
     """
     out = Path(out)
     if (out / "truth.json").exists() or (out / "cases").exists():
@@ -338,7 +359,7 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     cases = []
     for n, (rig, effect, k) in enumerate(plan, 1):
         start = time.perf_counter()
-        made = make_case(rig, effect, k, seed, duration)
+        made = make_case(rig, effect, k, seed, duration, recorder_of(rig, segments, step_divisor))
         if made is None:
             skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
             continue
@@ -354,7 +375,8 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
              "concealment", "duration_s")
     truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
-             "cases": [{k: c[k] for k in order} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped}
+             "cases": [{k: c[k] for k in order} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
+             "recorder": {"segments": segments, "step_divisor": step_divisor}}
     (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return truth
 
@@ -374,6 +396,11 @@ def main(argv=None) -> int:
                         help=f"cases per rig of each hard kind ({', '.join(HARD_KINDS)}; default 0)")
     parser.add_argument("--effects", default="", metavar="LIST", help="comma-separated catalogue effects (default: all)")
     parser.add_argument("--duration", type=float, default=6.0, metavar="S", help="length of each recording, s (default 6)")
+    parser.add_argument("--segments", type=int, default=0, metavar="N",
+                        help="record with N segments per flexible part, as another implementation of the datasheet "
+                             "would differ from ours (default 0: ours; the diagnosis is not told)")
+    parser.add_argument("--step-divisor", type=int, default=1, metavar="K",
+                        help="record with a physics step K x finer than ours (default 1)")
     args = parser.parse_args(argv)
     rigs = [r for r in args.rigs.split(",") if r]
     effects = [e for e in args.effects.split(",") if e] or None
@@ -384,11 +411,14 @@ def main(argv=None) -> int:
                      f"(catalogue: {', '.join(CATALOGUE)})")
     if args.per_effect < 0 or args.clean < 0 or args.hard < 0:
         parser.error("--per-effect, --clean and --hard must be >= 0")
+    if args.segments != 0 and not 2 <= args.segments <= 100 or args.step_divisor < 1:
+        parser.error(f"--segments must be 0 or within 2 .. 100 and --step-divisor >= 1, got {args.segments}, {args.step_divisor}")
     if not 0.2 <= args.duration <= 600:
         parser.error(f"--duration must be within 0.2 .. 600 s (the laser step is at 0.1 s), got {args.duration:g}")
     start = time.perf_counter()
     try:
-        truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard)
+        truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard,
+                           segments=args.segments, step_divisor=args.step_divisor)
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     for s in truth["skipped"]:

@@ -73,8 +73,10 @@ def resimulate(rec: Recording, effects: list[dict] = (), parameters: dict | None
 
 
 def resimulate_many(jobs: list[tuple], nthread: int = 0, rig: RigDescription | None = None) -> list[Recording | SimulationError]:
-    """`resimulate(*job)` for every job (rec, effects, parameters, until, noise_seed), stepped together
-    in lockstep (lockstep.simulate_batch, nthread 0: all CPUs); a diverged job gives its SimulationError.
+    """`resimulate(*job)` for every job (rec, effects, parameters, until, noise_seed[, finer]), stepped together
+    in lockstep (lockstep.simulate_batch, nthread 0: all CPUs); a diverged job gives its SimulationError,
+    and so does one whose model cannot be built (a payload lighter than none: the diagnosis tried a
+    parameter beyond what is physical), without stopping the others.
     `rig`: the recordings' rig, loaded (else each rig is loaded by its name)."""
     out: list = [None] * len(jobs)
     by_rig: dict[str, list[int]] = {}
@@ -83,13 +85,46 @@ def resimulate_many(jobs: list[tuple], nthread: int = 0, rig: RigDescription | N
     for name, ks in by_rig.items():
         description = rig if rig is not None and rig.name == name else load_rig(jobs[ks[0]][0].rig)
         scenarios = [_resim_scenario(description, *jobs[k]) for k in ks]
-        for k, result in zip(ks, simulate_batch(scenarios, nthread=nthread, rig=description)):
+        try:
+            results = simulate_batch(scenarios, nthread=nthread, rig=description)
+        except ConfigError:
+            results = [_built_or_error(s, nthread, description) for s in scenarios]
+        for k, result in zip(ks, results):
             out[k] = result if isinstance(result, SimulationError) else _sampled(jobs[k][0], result.recording)
     return out
 
 
-def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=None, until=None, noise_seed=None) -> dict:
+def _built_or_error(scenario: dict, nthread: int, rig: RigDescription):
+    """One scenario simulated alone; a SimulationError if the effects or parameters it was given make
+    a model that cannot be built (a ConfigError of the recording itself stays one)."""
+    try:
+        return simulate_batch([scenario], nthread=nthread, rig=rig)[0]
+    except ConfigError as exc:
+        if not scenario["effects"] and not scenario["parameters"]:
+            raise
+        return SimulationError(f"the model cannot be built: {exc}")
+
+
+def finer_discretisation(rig: RigDescription, scenario: dict, factor: int) -> dict:
+    """Scenario keys that simulate `scenario` `factor` x finer: that many times the segments per flexible
+    part and a physics step that many times shorter ({} for factor 1). What the simulator's own
+    discretisation leaves (its results against a finer one's) is model error the data cannot resolve."""
+    if factor == 1:
+        return {}
+    out = {}
+    segments = getattr(rig.segmented(scenario["n_segments"]), "n_segments", 0)
+    if segments:
+        out["n_segments"] = factor * segments
+    step = scenario["timestep"] or getattr(rig.params, "timestep", 0.0)  # s: the scenario's, else the model's
+    if step:
+        out["timestep"] = step / factor
+    return out
+
+
+def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=None, until=None, noise_seed=None,
+                    finer: int = 1) -> dict:
     scenario = scenario_from_recording(rec, rig)
+    scenario.update(finer_discretisation(rig, scenario, finer))
     if noise_seed is not None:
         scenario.update(noise=True, seed=int(noise_seed))
     if until is not None:

@@ -91,8 +91,9 @@ def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
 
 
 def _simulate_some(jobs: list[tuple], nthread: int = 1) -> list[Recording | None]:
-    """Recordings i re-simulated with their models, jobs (model, i, noise_seed), in lockstep."""
-    sims = resimulate_many([(_DATA.recordings[i], m.effects, m.parameters, None, seed) for m, i, seed in jobs], nthread, _DATA.rig)
+    """Recordings i re-simulated with their models, jobs (model, i, noise_seed, finer), in lockstep."""
+    sims = resimulate_many([(_DATA.recordings[i], m.effects, m.parameters, None, seed, finer)
+                            for m, i, seed, finer in jobs], nthread, _DATA.rig)
     return [None if isinstance(s, SimulationError) else s for s in sims]
 
 
@@ -122,15 +123,16 @@ class Runner:
             self.jobs_done(done, len(jobs))
         return [f.result() for f in futures]
 
-    def simulate(self, model: Model, noise_seed: int | None = None) -> list[Recording] | None:
+    def simulate(self, model: Model, noise_seed: int | None = None, finer: int = 1) -> list[Recording] | None:
         """Every recording re-simulated with `model` (in lockstep; with `noise_seed` the rig's
-        measurement noise on); None if one diverged."""
-        return self.simulate_seeds(model, [noise_seed])[0]
+        measurement noise on; `finer` x finer segments and step, resim.finer_discretisation); None if
+        one diverged."""
+        return self.simulate_seeds(model, [noise_seed], finer)[0]
 
-    def simulate_seeds(self, model: Model, seeds: list[int | None]) -> list[list[Recording] | None]:
+    def simulate_seeds(self, model: Model, seeds: list[int | None], finer: int = 1) -> list[list[Recording] | None]:
         """`simulate` once per noise seed (None: noise off), all in one lockstep call."""
         n = len(self.data.recordings)
-        sims = self.lockstep(_simulate_some, [(model, i, seed) for seed in seeds for i in range(n)])
+        sims = self.lockstep(_simulate_some, [(model, i, seed, finer) for seed in seeds for i in range(n)])
         return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]
                 for k in range(len(seeds))]
 
