@@ -163,8 +163,8 @@ def add_discretisation_error(data: Data, ours: list[Recording], finer: list[Reco
     finding should be made of it. Measured on 6 s Watflex elbow steps (12 segments at 0.5 ms): against
     twice as fine, strain_2A 3.1-3.4 x its noise, the elbow encoder 3.0 x (the 0.1 rad staircase: 0.9 x and
     1.7 x); against four times as fine 4.0-4.2 x and 3.6-4.8 x (so a factor 2 is a lower bound); laser arm
-    0.02-0.06 x. The added part is kept
-    per recording and channel in `data.discretisation` (the report's noise table)."""
+    0.02-0.06 x. The added part is kept per recording and channel in `data.discretisation` (the report's
+    noise table)."""
     data.discretisation = [{} for _ in data.recordings]
     for i, (a, b) in enumerate(zip(ours, finer)):
         for c in data.channels[i]:
