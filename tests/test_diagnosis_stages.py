@@ -10,6 +10,7 @@ from watflex_sim.diagnosis.data import measured_noise, split_blocks
 from watflex_sim.diagnosis.explain import direction, physical_place, units_at
 from watflex_sim.diagnosis.fitting import huber_threshold
 from watflex_sim.diagnosis.pipeline import explained_share, fold_within_tolerance
+from watflex_sim.model import load_model
 
 
 @pytest.fixture(scope="module")
@@ -411,7 +412,8 @@ def test_the_refit_compass_runs_only_near_the_noise():
 
 def test_the_discretisation_error_joins_the_noise_floor(laser_recordings):
     """finer_discretisation: twice the segments and half the step of the model (a rig without generated
-    flexible parts keeps its own); add_discretisation_error adds the RMS difference to a finer simulation
+    flexible parts keeps its segments; one without parameters, a datasheet's, halves its compiled step);
+    add_discretisation_error adds the RMS difference to a finer simulation
     in quadrature to each channel's noise and keeps it for the report."""
     from watflex_sim.diagnosis.data import add_discretisation_error
     from watflex_sim.recording import Recording
@@ -423,7 +425,9 @@ def test_the_discretisation_error_joins_the_noise_floor(laser_recordings):
     assert finer_discretisation(laser, scenario, 2) == {"n_segments": 22, "timestep": pytest.approx(5e-5)}
     assert finer_discretisation(laser, scenario, 1) == {}
     assert finer_discretisation(watflex, load_scenario("watflex_elbow_step"), 2) == {"n_segments": 24, "timestep": pytest.approx(2.5e-4)}
-    assert finer_discretisation(load_rig("quanser_2dsfl"), {"n_segments": 0, "timestep": 0.0}, 2) == {}
+    quanser = load_rig("quanser_2dsfl")  # described by a datasheet alone: its compiled model's step, halved
+    assert finer_discretisation(quanser, {"n_segments": 0, "timestep": 0.0}, 2) == {
+        "timestep": pytest.approx(load_model(quanser).opt.timestep / 2, rel=1e-12)}
     data = prepare(laser_recordings, ["a", "b"])
     before = [dict(n) for n in data.noise]
     shifted = [Recording(r.time, {c: v + 0.03 for c, v in r.channels.items()}, r.meta) for r in data.recordings]

@@ -49,7 +49,7 @@ import numpy as np  # noqa: E402
 
 from watflex_sim import SimulationError, check, load_scenario, simulate, write_recording  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
-from watflex_sim.model import load_model  # noqa: E402
+from watflex_sim.resim import model_timestep  # noqa: E402
 from watflex_sim.rigdesc import load_rig  # noqa: E402
 
 FORMAT = "flexarm-benchmark/1"
@@ -261,7 +261,7 @@ def recorder_of(rig: str, segments: int = 0, step_divisor: int = 1) -> dict:
     its own (the sidecars do not say), as it would recordings from an independent implementation."""
     out = {"n_segments": segments} if segments else {}
     if step_divisor != 1:
-        out["timestep"] = load_model(rig).opt.timestep / step_divisor  # s
+        out["timestep"] = model_timestep(load_rig(rig)) / step_divisor  # s
     return out
 
 

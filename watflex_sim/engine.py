@@ -179,13 +179,13 @@ class _References:
     """Reference values by tick: `refs[k]` is {channel: value} at t = k ms (columns, not dicts per tick)."""
 
     def __init__(self, columns: dict[str, np.ndarray], n: int):
-        self.columns, self.n = columns, n
+        self.columns, self.n = {c: np.asarray(v, dtype=float).tolist() for c, v in columns.items()}, n  # Python floats
 
     def __len__(self) -> int:
         return self.n
 
     def __getitem__(self, k: int) -> dict[str, float]:
-        return {c: float(v[k]) for c, v in self.columns.items()}
+        return {c: v[k] for c, v in self.columns.items()}
 
 
 def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float = 0.3) -> None:
@@ -269,8 +269,9 @@ class ControlLoop:
             raise ConfigError(f"unknown reference channel(s) for {rig_name}: {', '.join(sorted(unknown))}")
         self.n_ticks = int(round(scenario["duration_s"] / period))
         # references depend on t only: tabulate them once for every tick
-        times = [k * period for k in range(self.n_ticks)]
-        self.references = _References({c: np.array([f(t) for t in times]) for c, f in references.items()}, self.n_ticks)
+        times = np.arange(self.n_ticks) * period
+        self.references = _References({c: f.table(times) if hasattr(f, "table") else np.array([f(t) for t in times.tolist()])
+                                       for c, f in references.items()}, self.n_ticks)
         self.n_segments = getattr(description.segmented(scenario["n_segments"]), "n_segments", 0)
         self.monitor = GrowthMonitor(self.model, self.n_segments)
         ticks = CONTROL_PERIOD / period  # delays are counted in CONTROL_PERIOD ticks (effects.delay): in ours
@@ -398,8 +399,8 @@ class Tape:
 
     def __init__(self, loop: ControlLoop):
         self.loop, rig = loop, loop.rig
-        self.column = {c: j for j, c in enumerate(rig.channels)}
-        self.table = np.full((loop.n_ticks, len(self.column)), np.nan)  # memory is what the run records
+        self.names = tuple(rig.channels)
+        self.rows: list[list[float] | None] = [None] * loop.n_ticks  # per tick, a value per channel (NaN: none)
         self.frame_every = max(1, int(round(1.0 / (loop.scenario["frame_rate_hz"] * loop.period))))
         self.frame_ticks = range(0, loop.n_ticks, self.frame_every)
         self.frames = np.empty((len(self.frame_ticks), *np.shape(rig.arm_points())))
@@ -411,17 +412,16 @@ class Tape:
 
     def write(self, k: int, obs: dict[str, float], recorded: dict[str, float]) -> None:
         """Record tick k's measured and recorded channels."""
-        column, row = self.column, self.table[k]
-        for c, v in (obs | recorded).items():
-            j = column.get(c)
-            if j is not None:
-                row[j] = v
+        values = obs | recorded
+        self.rows[k] = [values.get(c, math.nan) for c in self.names]
 
     def result(self, wall: float) -> "SimResult":
         """The finished run (wall: s it took)."""
-        loop, scenario, table, period = self.loop, self.loop.scenario, self.table, self.loop.period
+        loop, scenario, period = self.loop, self.loop.scenario, self.loop.period
         n_ticks = loop.n_ticks
-        channels = {c: np.ascontiguousarray(table[:, j]) for c, j in self.column.items() if not np.isnan(table[:, j]).all()}
+        empty = [math.nan] * len(self.names)
+        table = np.array([row or empty for row in self.rows], dtype=float).reshape(n_ticks, len(self.names))
+        channels = {c: np.ascontiguousarray(table[:, j]) for j, c in enumerate(self.names) if not np.isnan(table[:, j]).all()}
         controller_meta = dict(scenario["controller"])
         meta = {
             "format": FORMAT,

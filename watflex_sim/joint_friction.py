@@ -200,9 +200,10 @@ class BatchFriction:
         laws = [r[3] for r in rows]
         self.lugre = [(k, law, state) for k, (_i, _d, _q, law, state) in enumerate(rows) if law.law == "lugre"]
         self.exp = np.array([law.law == "exponential" for law in laws], dtype=bool)
+        self.all_exp = bool(self.exp.all())
         col = lambda f: np.array([f(law) for law in laws], dtype=float)  # noqa: E731
-        self.side = {s: {name: col(lambda law, s=s, name=name: getattr(getattr(law, s), name))
-                         for name in ("alpha0", "alpha1", "alpha2", "v_s")} for s in ("positive", "negative")}
+        self.side = {s: np.array([col(lambda law, s=s, name=name: getattr(getattr(law, s), name))  # (4, n): alpha0,
+                                  for name in ("alpha0", "alpha1", "alpha2", "v_s")]) for s in ("positive", "negative")}  # 1, 2, v_s
         self.dwell_gain, self.dwell_time = col(lambda law: law.dwell_gain), col(lambda law: law.dwell_time)
         self.ripple = col(lambda law: law.ripple_amplitude)
         self.ripple_period, self.ripple_phase = col(lambda law: law.ripple_period), col(lambda law: law.ripple_phase)
@@ -219,16 +220,19 @@ class BatchFriction:
         sim, dof = self.sim, self.dof
         v = qvel[sim, dof]
         self.frictionloss[sim, dof] = self.pending  # the level the callback set during the last step
-        forward = np.where(v > V_REST, True, np.where(v < -V_REST, False, qfrc_constraint[sim, dof] <= 0))
-        pos, neg = self.side["positive"], self.side["negative"]
-        p = {name: np.where(forward, pos[name], neg[name]) for name in pos}
-        self.rest = np.where(np.abs(v) < V_REST, self.rest + self.dt, 0.0)
-        level = p["alpha0"] + p["alpha1"] * np.exp(-((np.abs(v) / p["v_s"]) ** 2.0))
+        forward = (v > V_REST) | (~(v < -V_REST) & (qfrc_constraint[sim, dof] <= 0))  # at rest: the push's way
+        alpha0, alpha1, alpha2, v_s = np.where(forward, self.side["positive"], self.side["negative"])
+        speed = np.abs(v)
+        self.rest = np.where(speed < V_REST, self.rest + self.dt, 0.0)
+        level = alpha0 + alpha1 * np.exp(-((speed / v_s) ** 2.0))
         dwell = self.dwell_gain != 0
         if dwell.any():
             level = np.where(dwell, level * (1.0 + self.dwell_gain * (1.0 - np.exp(-self.rest / self.dwell_time))), level)
-        self.pending = np.where(self.exp, level, self.pending)
-        tau = np.where(self.exp, -p["alpha2"] * v, 0.0)
+        if self.all_exp:
+            self.pending, tau = level, -alpha2 * v
+        else:
+            self.pending = np.where(self.exp, level, self.pending)
+            tau = np.where(self.exp, -alpha2 * v, 0.0)
         for k, law, state in self.lugre:
             state["F"], state["z"] = lugre_step(float(v[k]), state["z"], float(self.dt[k]), law.sigma0, law.sigma1, law.positive, law.negative)
             tau[k] = -state["F"]

@@ -7,7 +7,7 @@ import numpy as np
 
 from .engine import SimulationError, simulate
 from .lockstep import simulate_batch
-from .model import ConfigError
+from .model import ConfigError, load_model
 from .recording import Recording
 from .rigdesc import RigDescription, load_rig
 from .scenario import DEFAULTS, check
@@ -115,10 +115,14 @@ def finer_discretisation(rig: RigDescription, scenario: dict, factor: int) -> di
     segments = getattr(rig.segmented(scenario["n_segments"]), "n_segments", 0)
     if segments:
         out["n_segments"] = factor * segments
-    step = scenario["timestep"] or getattr(rig.params, "timestep", 0.0)  # s: the scenario's, else the model's
-    if step:
-        out["timestep"] = step / factor
+    out["timestep"] = (scenario["timestep"] or model_timestep(rig)) / factor  # s: the scenario's, else the model's
     return out
+
+
+def model_timestep(rig: RigDescription) -> float:
+    """The physics step (s) the rig's model is built with: its parameters', else the compiled model's
+    (a rig described by a datasheet alone)."""
+    return getattr(rig.params, "timestep", 0.0) or float(load_model(rig).opt.timestep)
 
 
 def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=None, until=None, noise_seed=None,

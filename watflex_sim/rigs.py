@@ -219,9 +219,11 @@ class WatflexRig(Rig):
             "shoulder_angle": quantise(angle["shoulder"], p.encoder_step),
             "elbow_angle": quantise(angle["elbow"], p.encoder_step),
         }
-        limit, step = p.strain_adc_range, self._adc_step
+        limit, step, noise = p.strain_adc_range, self._adc_step, self._strain_noise
         for channel, qa, qb, va, vb in self._gauges:
-            volts = va * qpos[qa] + vb * qpos[qb] + self._strain_noise * self.gauss()
+            volts = va * qpos[qa] + vb * qpos[qb]
+            if noise:  # noise off (re-simulations): no draws
+                volts += noise * self.gauss()
             obs[channel] = quantise(clip(volts, limit), step)
         if self._tick % self._camera_every == 0 and self._tip_xpos is not None:
             e = self._camera_noise

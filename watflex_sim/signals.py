@@ -17,7 +17,8 @@ def _number(spec: dict, key: str, default=None) -> float:
 
 
 def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[float], float]:
-    """A function t (s) -> value from a scenario table.
+    """A function t (s) -> value from a scenario table; `f.table(times)`, where present, gives the values
+    at an array of times at once (the same numbers).
 
     Kinds: `step` (amplitude, time_s), `staircase` (levels, times_s: value levels[i] from
     times_s[i] on, 0 before), `triangle` (amplitude, slope per second, periods, start_s: a
@@ -43,6 +44,7 @@ def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[
             i = int(np.searchsorted(times_a, t, side="right"))
             return float(levels_a[i - 1]) if i > 0 else 0.0
 
+        staircase.table = lambda ts: np.where(ts >= times_a[0], levels_a[np.searchsorted(times_a, ts, side="right") - 1], 0.0)
         return staircase
     if kind == "triangle":
         amplitude, slope = _number(spec, "amplitude"), _number(spec, "slope")
@@ -76,6 +78,7 @@ def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[
             i = int(np.searchsorted(times, t + 0.5 * CONTROL_PERIOD, side="right")) - 1
             return float(values[max(i, 0)])
 
+        held.table = lambda ts: values[np.maximum(np.searchsorted(times, ts + 0.5 * CONTROL_PERIOD, side="right") - 1, 0)]
         return held
     if kind == "constant":
         value = k * _number(spec, "value")
