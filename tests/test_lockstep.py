@@ -32,9 +32,8 @@ def _max_differences(single, batched) -> dict[str, float]:
 
 def _compare(scenarios):
     """Every scenario's batch recording against its single run; a structure with one member would
-    run on the single-run driver, so the cases below come at least in pairs (`always`: in lockstep however
-    few, where simulate_batch would otherwise run them one by one)."""
-    results = simulate_batch(scenarios, nthread=2, always=True)
+    run on the single-run driver, so the cases below come at least in pairs."""
+    results = simulate_batch(scenarios, nthread=2)
     for scenario, result in zip(scenarios, results):
         single = simulate(scenario).recording
         worst = _max_differences(single, result.recording)
@@ -78,7 +77,7 @@ def test_a_diverging_member_is_dropped_and_the_others_go_on():
     """A timestep far too large for the laser arm's beam (README: stable below 0.2 ms) diverges."""
     good = load_scenario("laser_arm_step", ["duration_s=0.6"])
     bad = load_scenario("laser_arm_step", ["duration_s=0.6", "timestep=0.001"])
-    ok, failed = simulate_batch([good, bad], always=True)
+    ok, failed = simulate_batch([good, bad])
     assert isinstance(failed, SimulationError)
     with pytest.raises(SimulationError):
         simulate(bad)
@@ -106,22 +105,3 @@ def test_a_model_that_cannot_be_built_fails_alone_in_a_resimulation_batch():
     assert isinstance(failed, SimulationError) and "cannot be built" in str(failed)
     alone = resimulate(rec)
     assert all(np.array_equal(fine.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels)
-
-
-def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
-    """lockstep._pays (tools/bench.py section 6): a batch pays a fixed cost per Batch.step call and tick,
-    and joint friction makes one call per physics step (the laser arm: 10 a tick). Measured on one thread,
-    lockstep / one by one: Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from 8; the laser arm with hub friction
-    1.6-3.4 at B = 2-4, ~1 at 8-16, 0.75-0.83 at 32. So 8 Watflex runs (nominal joint friction, 2 calls a
-    tick) or 8 frictionless laser runs go in lockstep, 16 laser runs with hub friction one by one, 30 of them
-    in lockstep."""
-    from watflex_sim.engine import ControlLoop
-    from watflex_sim.lockstep import _pays
-
-    def loops(name, n, sets=()):
-        return [ControlLoop(load_scenario(name, ["duration_s=0.1", f"seed={i}", *sets])) for i in range(n)]
-
-    coulomb = "effects=[{effect='coulomb_friction', where='hub', torque_positive=0.02, torque_negative=0.03}]"
-    assert _pays(loops("watflex_elbow_step", 8)) and not _pays(loops("watflex_elbow_step", 4))
-    assert _pays(loops("laser_arm_step", 8)) and not _pays(loops("laser_arm_step", 4))
-    assert not _pays(loops("laser_arm_step", 16, [coulomb])) and _pays(loops("laser_arm_step", 30, [coulomb]))
