@@ -1,12 +1,12 @@
-"""One physics, two drivers: lockstep.simulate_batch gives engine.simulate's recordings.
+"""One physics, two drivers: lockstep.simulate_batch gives engine.simulate's recordings, bit for bit.
 
 The batch runs the same ControlLoop control half and the same MuJoCo step (mujoco.batch is
-bit-identical to a loop of mj_step); what differs is where the joint friction's torque goes:
-qfrc_applied instead of qfrc_passive (added in another order, so the last bit of qfrc_smooth may
-differ), and its Stribeck level uses numpy's exp instead of math.exp (within an ulp). Channels
-must therefore agree exactly or within 1e-12 (a few ulps of the 1e-2..1e1 channel values).
-Measured with mujoco 3.17 / numpy 2: every channel of every case below is bit-identical (max
-difference 0), also over 2 s runs.
+bit-identical to a loop of mj_step). The joint friction is computed by two codes - the single run's
+passive callback, per joint on floats, and the batch's BatchFriction on arrays - that do the same
+arithmetic in the same order (numpy's exp and sin, x * x, the torque added to what the rig applies
+in qfrc_applied). Before they did (math.exp, a float's ** 2.0, the callback's torque in qfrc_passive)
+a laser arm with Stribeck friction differed by 4e-15 V after 3 s, and inside a diagnosis stick-slip
+made such an ulp another finding. So every channel must be equal: TOL is 0.
 """
 import numpy as np
 import pytest
@@ -15,7 +15,7 @@ from watflex_sim.engine import SimulationError, simulate
 from watflex_sim.lockstep import simulate_batch
 from watflex_sim.scenario import load_scenario
 
-TOL = 1e-12  # see the module docstring
+TOL = 0.0  # see the module docstring
 
 
 def _max_differences(single, batched) -> dict[str, float]:
@@ -32,8 +32,9 @@ def _max_differences(single, batched) -> dict[str, float]:
 
 def _compare(scenarios):
     """Every scenario's batch recording against its single run; a structure with one member would
-    run on the single-run driver, so the cases below come at least in pairs."""
-    results = simulate_batch(scenarios, nthread=2)
+    run on the single-run driver, so the cases below come at least in pairs (`always`: in lockstep however
+    few, where simulate_batch would otherwise run them one by one)."""
+    results = simulate_batch(scenarios, nthread=2, always=True)
     for scenario, result in zip(scenarios, results):
         single = simulate(scenario).recording
         worst = _max_differences(single, result.recording)
@@ -52,6 +53,14 @@ def test_laser_arm_seeds_and_coulomb_friction_match_single_runs():
     results = _compare(scenarios)
     a, b = (r.recording.channels["tip_sensor"] for r in results[:2])
     assert not np.array_equal(a, b)  # the seeds are really per simulation
+
+
+def test_stribeck_friction_on_an_unquantised_channel_matches_single_runs():
+    """The Stribeck level (alpha1 exp(-(v/v_s)^2)) and viscous term at the laser arm's hub, 3 s: the tip
+    sensor is not quantised, so an ulp of friction shows (4e-15 V when the callback used math.exp)."""
+    law = "{alpha0=0.3, alpha1=0.4, alpha2=0.5, v_s=0.05}"
+    _compare([load_scenario("laser_arm_step", ["duration_s=3", f"seed={s}", f"joint_friction={{hub={{positive={law}, "
+                                               f"negative={law}}}}}"]) for s in (1, 2)])
 
 
 def test_watflex_elbow_step_with_payload_and_locked_shoulder_match_single_runs():
@@ -77,7 +86,7 @@ def test_a_diverging_member_is_dropped_and_the_others_go_on():
     """A timestep far too large for the laser arm's beam (README: stable below 0.2 ms) diverges."""
     good = load_scenario("laser_arm_step", ["duration_s=0.6"])
     bad = load_scenario("laser_arm_step", ["duration_s=0.6", "timestep=0.001"])
-    ok, failed = simulate_batch([good, bad])
+    ok, failed = simulate_batch([good, bad], always=True)
     assert isinstance(failed, SimulationError)
     with pytest.raises(SimulationError):
         simulate(bad)
@@ -105,3 +114,22 @@ def test_a_model_that_cannot_be_built_fails_alone_in_a_resimulation_batch():
     assert isinstance(failed, SimulationError) and "cannot be built" in str(failed)
     alone = resimulate(rec)
     assert all(np.array_equal(fine.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels)
+
+
+def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
+    """lockstep._pays (tools/bench.py section 6): a batch pays a fixed cost per Batch.step call and tick,
+    and joint friction makes one call per physics step (the laser arm: 10 a tick). Measured on one thread,
+    lockstep / one by one: Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from 8; the laser arm with hub friction
+    1.6-3.4 at B = 2-4, ~1 at 8-16, 0.75-0.83 at 32. So 8 Watflex runs (nominal joint friction, 2 calls a
+    tick) or 8 frictionless laser runs go in lockstep, 16 laser runs with hub friction one by one, 30 of them
+    in lockstep."""
+    from watflex_sim.engine import ControlLoop
+    from watflex_sim.lockstep import _pays
+
+    def loops(name, n, sets=()):
+        return [ControlLoop(load_scenario(name, ["duration_s=0.1", f"seed={i}", *sets])) for i in range(n)]
+
+    coulomb = "effects=[{effect='coulomb_friction', where='hub', torque_positive=0.02, torque_negative=0.03}]"
+    assert _pays(loops("watflex_elbow_step", 8)) and not _pays(loops("watflex_elbow_step", 4))
+    assert _pays(loops("laser_arm_step", 8)) and not _pays(loops("laser_arm_step", 4))
+    assert not _pays(loops("laser_arm_step", 16, [coulomb])) and _pays(loops("laser_arm_step", 30, [coulomb]))

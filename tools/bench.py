@@ -15,7 +15,7 @@ Usage: python tools/bench.py [--quick] [--profile SCENARIO] [...]
    mj_step on laser_arm_step and watflex_elbow_step, 1 vs 2 threads, where the time goes, and a
    sweep's runs per second against its bare-physics limit.
 6. When a lockstep batch pays: B = 2..32 runs in lockstep on one thread against one by one (laser arm with and
-   without hub friction, Watflex).
+   without hub friction, Watflex), and the driver simulate_batch picks.
 
 Every timing is run --repeats times (default 3) and the best is reported. The default run
 takes well under 2 minutes on 2 cores; --quick caps scenarios at 1 s simulated and the sweep
@@ -596,9 +596,9 @@ def bench_lockstep(args) -> str:
         batch = [load_scenario(name, [f"duration_s={duration}", f"seed={i}"]) for i in range(max(sizes))]
         cells = [name, f"{bare * 1e6:.2f}"]
         for b in sizes:
-            per = min(simulate_batch(batch[:b], nthread=2)[0].wall_time_s for _ in range(args.repeats)) / steps
+            per = min(simulate_batch(batch[:b], nthread=2, always=True)[0].wall_time_s for _ in range(args.repeats)) / steps
             cells.append(f"{per * 1e6:.2f} ({per / bare:.2f})")
-        one = min(simulate_batch(batch[:32], nthread=1)[0].wall_time_s for _ in range(args.repeats)) / steps
+        one = min(simulate_batch(batch[:32], nthread=1, always=True)[0].wall_time_s for _ in range(args.repeats)) / steps
         cells.append(f"{one * 1e6:.2f} ({one / bare:.2f})")
         rows.append(cells)
         profiler = cProfile.Profile()
@@ -661,8 +661,8 @@ HUB_COULOMB = "effects=[{effect='coulomb_friction', where='hub', torque_positive
 def bench_pays(args) -> str:
     """Section 6, when a lockstep batch pays: B runs of one structure (seeds 0..B-1) in lockstep on one
     thread (as a diagnosis worker runs them) against the same runs one by one on the single-run driver,
-    set-up included in both."""
-    from watflex_sim.lockstep import simulate_batch
+    set-up included in both; and the driver lockstep._pays picks."""
+    from watflex_sim.lockstep import ControlLoop, _pays, simulate_batch
 
     duration = 0.5 if args.quick else 1.0
     cases = (("laser_arm_step", []), ("laser_arm_step (hub Coulomb friction)", [HUB_COULOMB]), ("watflex_elbow_step", []))
@@ -675,21 +675,23 @@ def bench_pays(args) -> str:
             lock = single = float("inf")
             for _ in range(args.repeats):
                 t0 = time.perf_counter()
-                simulate_batch(runs, nthread=1)
+                simulate_batch(runs, nthread=1, always=True)
                 lock = min(lock, time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 for run in runs:
                     engine.simulate(run)
                 single = min(single, time.perf_counter() - t0)
-            cells.append(f"{lock / single:.2f}")
+            picked = "lockstep" if _pays([ControlLoop(run) for run in runs]) else "single"
+            cells.append(f"{lock / single:.2f} ({picked})")
         rows.append(cells)
     return "\n".join([
         f"## 6. When lockstep pays: wall time of B runs in lockstep / one by one ({duration:g} s runs, 1 thread, set-up included)",
         "",
         table(["scenario", *(f"B={b}" for b in PAYS_SIZES)], rows),
         "",
-        "- a batch pays a fixed cost per Batch.step call and tick (and the array friction's numpy work per call); with "
-        "joint friction it makes one call per physics step (the laser arm: 10 a tick), not one per tick.",
+        "- in brackets: the driver simulate_batch picks (lockstep._pays). A batch pays a fixed cost per Batch.step call "
+        "and tick (and the array friction's numpy work per call); with joint friction it makes one call per physics "
+        "step (the laser arm: 10 a tick), not one per tick.",
     ])
 
 

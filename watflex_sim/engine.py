@@ -294,10 +294,12 @@ class ControlLoop:
     def tick(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
         """Run control period k; return (measured channels, recorded commands) at its start."""
         obs, recorded = self.control(k)
+        self.friction.take_applied()  # the friction's torque is added to what the rig applies, during the steps
         if self._due:  # jitter: the previous command holds until the new one is due
             mujoco.mj_step(self.model, self.data, nstep=self._due)
             self.release(self._due)
         mujoco.mj_step(self.model, self.data, nstep=self.n_sub - self._due)
+        self.friction.restore_applied()
         mujoco.mj_kinematics(self.model, self.data)  # mj_step leaves positions one substep old
         self.monitor.update(self.data, k)
         if k % CHECK_EVERY == CHECK_EVERY - 1 or k == self.n_ticks - 1:

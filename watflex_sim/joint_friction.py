@@ -4,10 +4,18 @@ Sticking is MuJoCo's own: each hinge with friction has a `frictionloss` constrai
 nearly hard in the model: solref 1 ms, solimp 0.9999), which holds the joint exactly under
 any coupled load up to its level and slides at that level beyond it. The callback sets that
 level every physics step from the friction law (break-away at rest, the Stribeck level
-of the direction of motion when sliding, raised by dwell time) and adds what is not a
-level (viscous, position-dependent torque) as a passive torque. The LuGre option replaces
+of the direction of motion when sliding, raised by dwell time) and applies what is not a
+level (viscous, position-dependent torque) as a torque. The LuGre option replaces
 both by the LuGre torque. The level set in one step acts from the next (MuJoCo builds its
 constraints before the passive forces), a lag of one physics step (0.1-0.5 ms).
+
+One physics, two drivers: the callback (single runs) and `BatchFriction` (lockstep batches) give
+the same numbers to the last bit. Both add the torque to what the rig applies in `qfrc_applied`
+(the callback may write it: MuJoCo reads it after the passive forces), and the callback does its
+arithmetic as numpy does on arrays: `numpy.exp` and `numpy.sin` (math.exp differs from numpy's in
+the last bit for ~5 % of arguments) and x * x for a square (what numpy's `** 2.0` computes; a
+Python float's `** 2.0` differs for ~0.1 %). An ulp is not harmless here: stick-slip amplifies it
+into another stopping point, and a diagnosis' findings then depended on which driver ran a model.
 
 MuJoCo's callbacks are global to the process: use one simulation per process at a time and
 always leave the `with` block (the callback is removed in `__exit__`).
@@ -21,7 +29,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from .friction import lugre_step, stribeck_level
+from .friction import lugre_step
 from .model import ConfigError
 from .params import Friction
 
@@ -129,6 +137,7 @@ class FrictionCallback:
             dof = int(model.jnt_dofadr[jid])
             self.joints.append([dof, int(model.jnt_qposadr[jid]), law, {"rest": 0.0, "z": 0.0}])
             model.dof_frictionloss[dof] = law.breakaway(+1) if law.law == "exponential" else 0.0
+        self.applied = {dof: float(data.qfrc_applied[dof]) for dof, *_ in self.joints}  # N m: what the rig applies
         self._previous = None
         self._time = math.nan  # simulation time of the last evaluation (s)
 
@@ -141,6 +150,17 @@ class FrictionCallback:
     def __exit__(self, *exc) -> None:
         if self.joints:
             mujoco.set_mjcb_passive(self._previous)
+            self.restore_applied()
+
+    def take_applied(self) -> None:
+        """Note what the rig applies at the friction's joints (`qfrc_applied`, N m) before a tick's steps."""
+        for dof in self.applied:
+            self.applied[dof] = self.data.qfrc_applied[dof].item()
+
+    def restore_applied(self) -> None:
+        """Leave `qfrc_applied` as the rig set it (the friction's torque is added to it during steps only)."""
+        for dof, value in self.applied.items():
+            self.data.qfrc_applied[dof] = value
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         if d is not self.data:
@@ -166,18 +186,20 @@ class FrictionCallback:
                 else:  # at rest: the direction the joint is pushed, against the holding force
                     direction = 1 if d.qfrc_constraint[dof] <= 0 else -1
                 p = law.positive if direction > 0 else law.negative
+                speed = abs(v)
                 if advance:
-                    state["rest"] = state["rest"] + dt if abs(v) < V_REST else 0.0
-                level = stribeck_level(abs(v), p)
+                    state["rest"] = state["rest"] + dt if speed < V_REST else 0.0
+                x = speed / p.v_s
+                level = p.alpha0 + p.alpha1 * float(np.exp(-(x * x)))  # stribeck_level, as BatchFriction computes it
                 if law.dwell_gain:
-                    level *= 1.0 + law.dwell_gain * (1.0 - math.exp(-state["rest"] / law.dwell_time))
+                    level = level * (1.0 + law.dwell_gain * (1.0 - float(np.exp(-state["rest"] / law.dwell_time))))
                 m.dof_frictionloss[dof] = level
                 torque -= p.alpha2 * v
             if law.ripple_amplitude or law.spring:
                 q = d.qpos[qadr].item()
-                torque -= law.ripple_amplitude * math.sin(2 * math.pi * q / law.ripple_period + law.ripple_phase)
+                torque -= law.ripple_amplitude * float(np.sin(2 * np.pi * q / law.ripple_period + law.ripple_phase))
                 torque -= law.spring * q
-            d.qfrc_passive[dof] += torque
+            d.qfrc_applied[dof] = self.applied[dof] + torque
 
 
 class BatchFriction:

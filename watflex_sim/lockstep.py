@@ -7,7 +7,7 @@ objects, which read and write rows of the batch's live arrays; the physics of al
 between steps (joint_friction.BatchFriction) instead of a per-simulation passive callback.
 Scenarios whose models differ in structure (segments, locked joints, added bodies or joints) run
 in separate batches; within one, the model fields that differ are per-simulation (`expand`). A
-scenario alone in its structure runs on the single-run driver (engine.run), which costs less there.
+group too small for a batch to pay (`_pays`) runs on the single-run driver (engine.run), one by one.
 """
 from __future__ import annotations
 
@@ -24,6 +24,8 @@ from .rigdesc import RigDescription
 
 log = logging.getLogger(__name__)
 
+LOCKSTEP_LEAST = 8  # simulations of one structure below which the single-run driver is cheaper
+LOCKSTEP_PER_CALL = 3  # ... and per Batch.step call a tick (_pays)
 _ROWS = ("qpos", "qvel", "ctrl", "xpos", "site_xpos")  # the MjData fields rigs and the loop touch
 _SIZES = ("nq", "nv", "nu", "na", "nbody", "njnt", "ngeom", "nsite", "nsensordata", "neq", "ntendon",
           "nmocap", "nuserdata", "nM", "nD", "nB", "nC", "nJmom", "nbvh", "nbvhstatic", "nbvhdynamic", "npair",
@@ -44,9 +46,11 @@ def structure(model: mujoco.MjModel) -> tuple:
 
 
 def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
-                   nthread: int = 0, rig: RigDescription | None = None) -> list[SimResult | SimulationError]:
+                   nthread: int = 0, rig: RigDescription | None = None, always: bool = False) -> list[SimResult | SimulationError]:
     """Run checked scenarios (scenario.load_scenario) of one or more rigs in lockstep; nthread 0: all CPUs;
-    `rig`: the scenarios' rig, loaded (else each is loaded by its scenario's name).
+    `rig`: the scenarios' rig, loaded (else each is loaded by its scenario's name). A structure's group
+    runs one by one on the single-run driver where a batch would not pay (`_pays`), unless `always`
+    (any group of two or more in lockstep: the tests that compare the drivers).
 
     Returns per scenario its SimResult (recording identical to `engine.simulate`'s, see
     tests/test_lockstep.py) or the SimulationError that stopped it (the others go on).
@@ -58,12 +62,25 @@ def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
         groups.setdefault((structure(loop.model), loop.n_sub), []).append(i)
     out: list = [None] * len(loops)
     for members in groups.values():
-        if len(members) == 1:  # alone, the single-run driver is cheaper (same recording)
-            out[members[0]] = _alone(loops[members[0]])
+        if len(members) == 1 or not (always or _pays([loops[i] for i in members])):  # the single-run driver
+            for i in members:  # is cheaper here (same recordings)
+                out[i] = _alone(loops[i])
             continue
         for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
             out[i] = result
     return out
+
+
+def _pays(loops: list[ControlLoop]) -> bool:
+    """Whether stepping these loops (one structure) in lockstep costs less than running them one by one:
+    a batch pays a fixed cost per Batch.step call and tick (the call, the array friction's numpy work),
+    and with joint friction or jitter it makes one call per physics step, not one per tick. Measured
+    (tools/bench.py section 6; 1 s re-simulations, lockstep / single-run time, both cores busy, +-20 %): Watflex (2 calls a tick)
+    1.56 / 1.09 / 0.83 / 0.56 at B = 2 / 4 / 8 / 16; the laser arm with hub friction (10 calls) 1.8-2.0 at
+    B = 4-8, 1.02 at 16, 0.75 at 32; without friction (1 call) 0.90-0.93 at 16-32."""
+    substepped = any(loop.friction.joints for loop in loops) or any(loop.delays is not None for loop in loops)
+    calls = loops[0].n_sub if substepped else 1  # Batch.step calls per tick
+    return len(loops) >= max(LOCKSTEP_LEAST, LOCKSTEP_PER_CALL * calls)
 
 
 def _alone(loop: ControlLoop) -> SimResult | SimulationError:

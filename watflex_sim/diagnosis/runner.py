@@ -2,7 +2,8 @@
 
 Contract: every worker holds the diagnosis' `Data` (set once by `Runner`); a job is one recording
 simulated with one `Model`. The jobs of one call (every recording, for one or several models) run
-together in lockstep (resim.resimulate_many, one mujoco.batch.Batch per model structure); with
+together in lockstep (resim.resimulate_many, one mujoco.batch.Batch per model structure; a group too small
+for a batch to pay, one by one: lockstep._pays); with
 worker processes they are split into one contiguous share per worker, each stepped on one thread
 (the batch's Python control half is single-threaded, so processes still pay on 2 cores). A model
 that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
