@@ -231,3 +231,27 @@ def test_another_implementation_records_what_its_sidecars_do_not_tell(bench, tmp
         ours, theirs = read_recording(out / rel), read_recording(tmp_path / rel)
         noise = load_rig("laser_arm").channels["tip_sensor"]["noise"]
         assert np.max(np.abs(ours.channels["tip_sensor"] - theirs.channels["tip_sensor"])) > 0.1 * noise
+
+
+def test_a_pair_case_carries_both_effects_and_the_recordings_show_both(tmp_path):
+    """--pairs: a case with two different effects at once. truth.json names the first as `effect` and the
+    second in `others`; re-simulated (noise off) with both effects the recordings are matched to within
+    their noise on every channel, with the first effect alone some channel is off by more than twice that
+    (the second effect is really in them)."""
+    truth = mb.make_cases(tmp_path, **dict(ARGS, rigs=("laser_arm",), per_effect=0, clean=0), pairs=1)
+    (case,) = truth["cases"]
+    assert case["kind"] == "pair" and case["concealment"] == "two effects" and len(case["others"]) == 1
+    second = case["others"][0]
+    assert {case["effect"], second["effect"]} <= set(EFFECTS) and case["effect"] != second["effect"]
+    both = [dict(effect=e["effect"], where=e["where"], **e["parameters"]) for e in (case, second)]
+    worst = {"both": 0.0, "first": 0.0}  # the largest RMS misfit over channels, in units of the channel's noise
+    for rel in case["recordings"]:
+        rec = read_recording(tmp_path / rel)
+        for label, effects in (("both", both), ("first", both[:1])):
+            sim = resimulate(rec, effects)
+            for c, x in rec.channels.items():
+                noise = load_rig("laser_arm").channels[c].get("noise", 0.0)
+                if noise:
+                    rms = float(np.sqrt(np.nanmean((sim.channels[c] - x) ** 2)))
+                    worst[label] = max(worst[label], rms / noise)
+    assert worst["both"] < 1.5 and worst["first"] > 2 * worst["both"], worst

@@ -1,7 +1,7 @@
 """Generate a public benchmark of concealed effects for `watflex-sim diagnose`.
 
 Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,watflex]
-           [--per-effect 1] [--clean 3] [--hard 2] [--effects a,b] [--duration 6] [--segments 30 --step-divisor 2]
+           [--per-effect 1] [--clean 3] [--hard 2] [--pairs 2] [--effects a,b] [--duration 6] [--segments 30 --step-divisor 2]
 
 A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
 rig with one catalogue effect added, listed in a shuffled order (the diagnosis must not depend on it):
@@ -18,6 +18,9 @@ rig's parameters perturbed within their tolerances. `--hard` cases per rig and k
     (link_stiffness_change, sensor_gain with a negative ratio);
   outside_catalogue: physics the catalogue does not have (a monitored sensor with a cubic
     nonlinearity, 30-60 % extra at its peak): the right answer is the verdict `unexplained`.
+`--pairs N` cases per rig carry two different effects at once (each at its own place and magnitude, no
+concealment but each other), as a real rig has more than one defect: the right answer finds both
+(truth.json: the first as `effect`, the second in `others`).
 
 `--segments N` / `--step-divisor K` record with another discretisation of the same datasheet (N segments per
 flexible part, a K x finer physics step), which the sidecars do not tell: what recordings from an independent
@@ -49,6 +52,7 @@ import numpy as np  # noqa: E402
 
 from watflex_sim import SimulationError, check, load_scenario, simulate, write_recording  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
+from watflex_sim.model import ConfigError  # noqa: E402
 from watflex_sim.resim import model_timestep  # noqa: E402
 from watflex_sim.rigdesc import load_rig  # noqa: E402
 
@@ -331,15 +335,51 @@ def make_hard_case(truth: dict, rig: str, kind: str, runs: list, rng: np.random.
     return truth, recordings
 
 
+def make_pair_case(rig: str, effects: list[str], k: int, seed: int, duration: float,
+                   recorder: dict | None = None) -> tuple[dict, list] | None:
+    """A case with two different effects of `effects` (each where `places` allows, at a magnitude of its
+    RANGES): (truth entry, [(stem, Recording)]), or None if the effects cannot be drawn or always diverge."""
+    key = f"{rig}/pair/{k}"
+    rng = _rng(seed, key)
+    usable = [e for e in effects if not why_skipped(rig, e)]
+    if len(usable) < 2:
+        return None
+    truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, kind="pair", effect=None, where=None,
+                 parameters={}, units={}, refit_parameters={}, concealment="two effects", duration_s=float(duration))
+    runs = experiments(rig, duration, rng, recorder=recorder)
+    for _ in range(MAX_DRAWS):
+        chosen = [str(e) for e in rng.choice(usable, size=2, replace=False)]
+        entries = []
+        for effect in chosen:
+            where = str(rng.choice(places(rig, effect)))
+            parameters = draw(_ranges(rig, effect, where), rng, small=False)
+            for param in CATALOGUE[effect][1]:  # a delay in whole ticks, as the simulator does it
+                if param.quantum and param.name in parameters:
+                    parameters[param.name] = max(1, round(parameters[param.name] / param.quantum)) * param.quantum
+            entries.append(dict(effect=effect, where=where, parameters=parameters, units=_units(rig, effect, where)))
+        try:
+            recordings = simulate_case(runs, [dict(effect=e["effect"], where=e["where"], **e["parameters"]) for e in entries], {})
+        except (SimulationError, ConfigError) as exc:
+            print(f"  {key}: {chosen} failed ({exc}); drawing again", file=sys.stderr)
+            continue
+        first, second = entries
+        truth.update(effect=first["effect"], where=first["where"], parameters=first["parameters"], units=first["units"],
+                     others=[second])
+        return truth, recordings
+    print(f"  {key}: skipped, diverged {MAX_DRAWS} times", file=sys.stderr)
+    return None
+
+
 def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
                duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0,
-               segments: int = 0, step_divisor: int = 1) -> dict:
+               segments: int = 0, step_divisor: int = 1, pairs: int = 0) -> dict:
     """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
     `segments`, `step_divisor`: the recording simulator's discretisation (recorder_of; default ours).
 
-    truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean or one of
+    truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean, pair or one of
     HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
-    "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s"}],
+    "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s", and for a pair
+    "others": [{"effect", "where", "parameters", "units"}]}],
     "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}}. `effects` None: the whole catalogue.
     """
     out = Path(out)
@@ -356,10 +396,13 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
                 plan += [(rig, effect, k) for k in range(per_effect)]
         plan += [(rig, None, k) for k in range(clean)]
         plan += [(rig, kind, k) for kind in HARD_KINDS for k in range(hard)]
+        plan += [(rig, "pair", k) for k in range(pairs)]
     cases = []
     for n, (rig, effect, k) in enumerate(plan, 1):
         start = time.perf_counter()
-        made = make_case(rig, effect, k, seed, duration, recorder_of(rig, segments, step_divisor))
+        recorder = recorder_of(rig, segments, step_divisor)
+        made = (make_pair_case(rig, effects, k, seed, duration, recorder) if effect == "pair"
+                else make_case(rig, effect, k, seed, duration, recorder))
         if made is None:
             skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
             continue
@@ -369,13 +412,14 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
         order = _rng(seed, f"order/{truth['id']}").permutation(len(paths))  # the diagnosis must not depend on it
         truth["recordings"] = [paths[i].relative_to(out).as_posix() for i in order]
         cases.append(truth)
-        log(f"[{n}/{len(plan)}] {truth['id']}: {effect or 'clean'}"
+        named = "+".join(e["effect"] for e in [truth, *truth.get("others", [])]) if effect == "pair" else effect
+        log(f"[{n}/{len(plan)}] {truth['id']}: {named or 'clean'}"
             f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
             f"{time.perf_counter() - start:.1f} s")
     order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
-             "concealment", "duration_s")
+             "concealment", "duration_s", "others")
     truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
-             "cases": [{k: c[k] for k in order} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
+             "cases": [{k: c[k] for k in order if k in c} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
              "recorder": {"segments": segments, "step_divisor": step_divisor}}
     (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return truth
@@ -394,6 +438,8 @@ def main(argv=None) -> int:
     parser.add_argument("--clean", type=int, default=3, metavar="N", help="clean cases per rig: no effect (default 3)")
     parser.add_argument("--hard", type=int, default=0, metavar="N",
                         help=f"cases per rig of each hard kind ({', '.join(HARD_KINDS)}; default 0)")
+    parser.add_argument("--pairs", type=int, default=0, metavar="N",
+                        help="cases per rig with two different effects of --effects at once (default 0)")
     parser.add_argument("--effects", default="", metavar="LIST", help="comma-separated catalogue effects (default: all)")
     parser.add_argument("--duration", type=float, default=6.0, metavar="S", help="length of each recording, s (default 6)")
     parser.add_argument("--segments", type=int, default=0, metavar="N",
@@ -409,8 +455,8 @@ def main(argv=None) -> int:
     if effects and set(effects) - set(CATALOGUE):
         parser.error(f"unknown effect(s) {', '.join(sorted(set(effects) - set(CATALOGUE)))} "
                      f"(catalogue: {', '.join(CATALOGUE)})")
-    if args.per_effect < 0 or args.clean < 0 or args.hard < 0:
-        parser.error("--per-effect, --clean and --hard must be >= 0")
+    if args.per_effect < 0 or args.clean < 0 or args.hard < 0 or args.pairs < 0:
+        parser.error("--per-effect, --clean, --hard and --pairs must be >= 0")
     if args.segments != 0 and not 2 <= args.segments <= 100 or args.step_divisor < 1:
         parser.error(f"--segments must be 0 or within 2 .. 100 and --step-divisor >= 1, got {args.segments}, {args.step_divisor}")
     if not 0.2 <= args.duration <= 600:
@@ -418,7 +464,7 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     try:
         truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard,
-                           segments=args.segments, step_divisor=args.step_divisor)
+                           segments=args.segments, step_divisor=args.step_divisor, pairs=args.pairs)
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     for s in truth["skipped"]:

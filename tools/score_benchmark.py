@@ -14,12 +14,14 @@ in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-o
   coverage (share of true parameter values inside the finding's interval), the verdicts, how often
   an experiment was proposed and, where one was, whether running it on the case's truth and
   diagnosing again named the true effect with no alternative left, median validation NRMSE ratio
-  after/before, time per case.
+  after/before, time per case; for cases with two effects (make_benchmark --pairs, kept out of the
+  top-1 figure): whether the first finding is one of them and whether both, and nothing else, are found.
 
 Parameter error of a finding that names the right effect: for each true parameter,
 |found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
 for a parameter whose true value is neutral, e.g. the zero side of a one-direction friction,
-relative to the largest true deviation of the effect); the case's error is the mean over them.
+relative to the largest true deviation of the effect); the case's error is the mean over them (over both
+true effects, each matched by name among the findings, in a two-effect case).
 Results are also written to BENCH_DIR/score.json, each case's whole report to BENCH_DIR/reports/ID.json.
 """
 from __future__ import annotations
@@ -81,13 +83,18 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     }
     if kind == "outside_catalogue":
         row["ours"] = "unexplained" if report.get("verdict") == "unexplained" else row["ours"]
-    if first and truth_effect in CATALOGUE:  # the true effect anywhere among the findings counts for the error
-        match = next((f for f in report["findings"] if f["effect"] == truth_effect), None)
+    truths = [case] + case.get("others", [])  # a pair case has two true effects
+    row["truth_all"] = [(t["effect"], t["where"]) for t in truths] if kind == "pair" else None
+    errors = []
+    for truth in truths if first and truth_effect in CATALOGUE else []:  # a true effect anywhere among the findings
+        match = next((f for f in report["findings"] if f["effect"] == truth["effect"]), None)  # counts for the error
         if match:
-            row["error"] = parameter_error(truth_effect, case["parameters"], match["parameters"])
-            row["found"] = {"true": case["parameters"], "found": match["parameters"], "intervals": match.get("intervals", {})}
-            row["covered"] = [lo <= case["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
-                              if k in case["parameters"]]
+            errors.append(parameter_error(truth["effect"], truth["parameters"], match["parameters"]))
+            row.setdefault("found", {"true": truth["parameters"], "found": match["parameters"], "intervals": match.get("intervals", {})})
+            row["covered"] += [lo <= truth["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
+                               if k in truth["parameters"]]
+    errors = [e for e in errors if e is not None]
+    row["error"] = statistics.mean(errors) if errors else None
     proposal = report.get("proposed_experiment") or {}
     if proposal.get("scenario_dict") and kind == "effect":
         row["resolved"] = resolves(case, recordings, names, proposal["scenario_dict"], truth_effect, workers)
@@ -138,7 +145,8 @@ def summary(rows: list[dict], baselines: bool) -> str:
         held = f"{r['held_before']:.3f} -> {r['held_after']:.3f}"
         if baselines:
             held += f" / {r['refit_held_after']:.3f} / {r['sindy_held_after']:.3f}"
-        truth = r["truth"] + (f" @ {r['where']}" if r["where"] else "")
+        truth = (" + ".join(f"{e} @ {w}" for e, w in r["truth_all"]) if r.get("truth_all")
+                 else r["truth"] + (f" @ {r['where']}" if r["where"] else ""))
         lines.append(f"| {r['id']} | {r['concealment']} | {truth} | {ours} | {base}{err} | {held} | {r['seconds']:.0f} |")
     confusion = defaultdict(Counter)
     for r in rows:
@@ -146,10 +154,11 @@ def summary(rows: list[dict], baselines: bool) -> str:
     lines += ["", "| true effect | named first by the diagnosis (count) |", "|---|---|"]
     for truth in sorted(confusion):
         lines.append(f"| {truth} | " + ", ".join(f"{k} {v}" for k, v in confusion[truth].most_common()) + " |")
-    effect_rows = [r for r in rows if r["truth"] in CATALOGUE]
+    pairs = [r for r in rows if r.get("kind") == "pair"]
+    effect_rows = [r for r in rows if r["truth"] in CATALOGUE and r.get("kind") != "pair"]
     clean = [r for r in rows if r["truth"] == NONE]
     outside = [r for r in rows if r["truth"] == "unexplained"]
-    errors = [r["error"] for r in effect_rows if r["error"] is not None]
+    errors = [r["error"] for r in effect_rows + pairs if r["error"] is not None]
     covered = [c for r in rows for c in r.get("covered", [])]
     verdicts = Counter(f"{r.get('kind', '?')}: {r.get('verdict')}" for r in rows)
     ratios = [r["held_after"] / r["held_before"] for r in rows if r["held_before"] > 0]
@@ -160,6 +169,10 @@ def summary(rows: list[dict], baselines: bool) -> str:
         ('"nothing missing" specificity on clean cases (target >= 90 %)',
          _pct(sum(r["ours"] == NONE and r.get("verdict", "nothing_missing") == "nothing_missing" for r in clean), len(clean))),
         ("`unexplained` recall, physics outside the catalogue (target >= 80 %)", _pct(sum(r["ours"] == "unexplained" for r in outside), len(outside))),
+        ("two effects at once: the first finding is one of them", _pct(sum(r["ours"] in {e for e, _ in r["truth_all"]}
+                                                                            for r in pairs), len(pairs))),
+        ("two effects at once: both found, and nothing else", _pct(sum(sorted(r["ours_all"]) == sorted(e for e, _ in r["truth_all"])
+                                                                   for r in pairs), len(pairs))),
         ("95 % intervals covering the true value (target >= 80 %)", _pct(sum(covered), len(covered))),
         ("verdicts by kind of case", ", ".join(f"{k} {v}" for k, v in sorted(verdicts.items()))),
         ("experiment proposed (alternatives within noise)", _pct(sum(r.get("proposed", False) for r in rows), len(rows))),
