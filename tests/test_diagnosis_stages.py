@@ -481,3 +481,18 @@ def test_the_polish_also_starts_from_the_rig_as_its_datasheet_says(monkeypatch):
     worse = pipeline.polish(None, Runner(), result, rig_start={"beam_EI": 1.04})
     assert worse["model"].parameters == {"beam_EI": 1.009}
     assert pipeline.polish(None, Runner(), result)["model"] is found  # no rig start: the fit alone
+
+
+def test_a_rig_parameter_pinned_at_its_bound_asks_for_the_effect_that_turns_its_knob(laser_recordings):
+    """beyond_tolerance(): the laser beam's EI refit to 0.95 (its -5 % bound, rigs.md) may be the datasheet wrong
+    beyond its tolerance: the candidate is link_stiffness_change at the beam, and it is not held to a later
+    finding's excess rule (seed 43: a beam 36 % softer beside a 5 ms delay was missed at 1.17 x the noise). An
+    inertia at its bound has no such effect; EI inside its tolerance, or the effect already found, asks nothing."""
+    from watflex_sim.diagnosis.pipeline import beyond_tolerance
+
+    data = prepare(laser_recordings, ["pos", "neg"])
+    pinned = beyond_tolerance(data, Model(parameters={"beam_EI": 0.95, "hub_inertia": 0.97}))
+    assert [(c.effect, c.where) for c in pinned] == [("link_stiffness_change", "beam")]
+    assert beyond_tolerance(data, Model(parameters={"beam_EI": 0.96, "hub_inertia": 0.97})) == []
+    found = [{"effect": "link_stiffness_change", "where": "beam", "ratio": 0.64}]
+    assert beyond_tolerance(data, Model(found, {"beam_EI": 0.95})) == []
