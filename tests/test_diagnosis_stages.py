@@ -496,3 +496,14 @@ def test_a_rig_parameter_pinned_at_its_bound_asks_for_the_effect_that_turns_its_
     assert beyond_tolerance(data, Model(parameters={"beam_EI": 0.96, "hub_inertia": 0.97})) == []
     found = [{"effect": "link_stiffness_change", "where": "beam", "ratio": 0.64}]
     assert beyond_tolerance(data, Model(found, {"beam_EI": 0.95})) == []
+
+
+def test_refit_parameters_say_which_quantity_their_value_is():
+    """report.parameter_values: the laser arm's `hub_inertia` turns the hub geom's mass (rigs/laser_arm.toml: knob
+    geom_mass), so its value is a mass in kg and says so, not an inertia in kg; `motor_inertia` is the hub joint's
+    armature in kg m^2."""
+    from watflex_sim.report import parameter_values
+
+    values = parameter_values("laser_arm", {"hub_inertia": 1.0, "motor_inertia": 1.0})
+    assert values["hub_inertia"]["unit"] == "kg" and values["hub_inertia"]["quantity"] == "mass of geom hub"
+    assert values["motor_inertia"]["unit"] == "kg m^2" and values["motor_inertia"]["quantity"].startswith("armature")

@@ -19,7 +19,8 @@ MAX_PLOTS = 6  # recordings plotted (the first ones)
 
 
 def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
-    """Refit parameters as ratio and, where the model holds it, value and unit (e.g. EMPS mass in kg)."""
+    """Refit parameters as ratio and, where the model holds it, value, unit and the quantity it is (e.g. EMPS
+    mass in kg; the laser arm's `hub_inertia` scales the hub geom's mass, which sets the hub's inertia)."""
     description = load_rig(rig)
     spec = description.spec()
     model = spec.compile()
@@ -28,11 +29,13 @@ def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
         knob, target = description.parameter_knobs().get(name, (None, None))
         entry = {"ratio": ratio}
         if knob == "geom_mass":
-            entry.update(value=float(spec.geom(target).mass) * ratio, unit="kg")
+            entry.update(value=float(spec.geom(target).mass) * ratio, unit="kg", quantity=f"mass of geom {target}")
         elif knob == "damping":
-            entry.update(value=float(model.dof_damping[model.joint(target).dofadr[0]]) * ratio, unit="N s/m or N m s/rad")
+            entry.update(value=float(model.dof_damping[model.joint(target).dofadr[0]]) * ratio, unit="N s/m or N m s/rad",
+                         quantity=f"damping of joint {target}")
         elif knob == "armature":
-            entry.update(value=float(model.dof_armature[model.joint(target).dofadr[0]]) * ratio, unit="kg m^2")
+            entry.update(value=float(model.dof_armature[model.joint(target).dofadr[0]]) * ratio, unit="kg m^2",
+                         quantity=f"armature (reflected inertia) of joint {target}")
         out[name] = entry
     return out
 
