@@ -174,6 +174,15 @@ def draw(ranges: dict, rng: np.random.Generator, small: bool) -> dict[str, float
     return out
 
 
+def in_whole_quanta(effect: str, parameters: dict[str, float]) -> dict[str, float]:
+    """`parameters` with each quantised one (a delay) in whole steps, at least one: the truth is what the
+    simulator does."""
+    for param in CATALOGUE[effect][1]:
+        if param.quantum and param.name in parameters:
+            parameters[param.name] = max(1, round(parameters[param.name] / param.quantum)) * param.quantum
+    return parameters
+
+
 def perturbed_parameters(rig: str, rng: np.random.Generator) -> dict[str, float]:
     """Every rig parameter's ratio drawn uniformly within its tolerance (rigs/<rig>.toml)."""
     return {name: float(f"{1.0 + rng.uniform(-p['tolerance'], p['tolerance']):.4g}")
@@ -292,10 +301,7 @@ def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float,
     concealment = "one direction only" if one_side else str(rng.choice(options))
     drop = ("elbow_angle",) if concealment == "indirect channel" else ()
     for _ in range(MAX_DRAWS):
-        parameters = draw(_ranges(rig, effect, where), rng, small=concealment == "small against noise")
-        for param in CATALOGUE[effect][1]:  # the truth is what the simulator does: a delay in whole ticks
-            if param.quantum and param.name in parameters:
-                parameters[param.name] = max(1, round(parameters[param.name] / param.quantum)) * param.quantum
+        parameters = in_whole_quanta(effect, draw(_ranges(rig, effect, where), rng, small=concealment == "small against noise"))
         if one_side:
             parameters[DIRECTIONAL[effect][int(rng.integers(2))]] = 0.0
         refit = perturbed_parameters(rig, rng) if concealment == "mixed with parameter error" else {}
@@ -352,10 +358,7 @@ def make_pair_case(rig: str, effects: list[str], k: int, seed: int, duration: fl
         entries = []
         for effect in chosen:
             where = str(rng.choice(places(rig, effect)))
-            parameters = draw(_ranges(rig, effect, where), rng, small=False)
-            for param in CATALOGUE[effect][1]:  # a delay in whole ticks, as the simulator does it
-                if param.quantum and param.name in parameters:
-                    parameters[param.name] = max(1, round(parameters[param.name] / param.quantum)) * param.quantum
+            parameters = in_whole_quanta(effect, draw(_ranges(rig, effect, where), rng, small=False))
             entries.append(dict(effect=effect, where=where, parameters=parameters, units=_units(rig, effect, where)))
         try:
             recordings = simulate_case(runs, [dict(effect=e["effect"], where=e["where"], **e["parameters"]) for e in entries], {})

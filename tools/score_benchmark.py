@@ -86,8 +86,9 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     truths = [case] + case.get("others", [])  # a pair case has two true effects
     row["truth_all"] = [(t["effect"], t["where"]) for t in truths] if kind == "pair" else None
     errors = []
-    for truth in truths if first and truth_effect in CATALOGUE else []:  # a true effect anywhere among the findings
-        match = next((f for f in report["findings"] if f["effect"] == truth["effect"]), None)  # counts for the error
+    scored_truths = truths if first and truth_effect in CATALOGUE else []
+    for truth in scored_truths:  # a true effect anywhere among the findings counts for the error
+        match = next((f for f in report["findings"] if f["effect"] == truth["effect"]), None)
         if match:
             errors.append(parameter_error(truth["effect"], truth["parameters"], match["parameters"]))
             row.setdefault("found", {"true": truth["parameters"], "found": match["parameters"], "intervals": match.get("intervals", {})})

@@ -13,8 +13,8 @@ One physics, two drivers: the callback (single runs) and `BatchFriction` (lockst
 the same numbers to the last bit. Both add the torque to what the rig applies in `qfrc_applied`
 (the callback may write it: MuJoCo reads it after the passive forces), and the callback does its
 arithmetic as numpy does on arrays: `numpy.exp` and `numpy.sin` (math.exp differs from numpy's in
-the last bit for ~5 % of arguments) and x * x for a square (what numpy's `** 2.0` computes; a
-Python float's `** 2.0` differs for ~0.1 %). An ulp is not harmless here: stick-slip amplifies it
+the last bit for ~5 % of arguments) and, in friction.stribeck_level, x * x for a square (what numpy's
+`** 2.0` computes; a Python float's `** 2.0` differs for ~0.1 %). An ulp is not harmless here: stick-slip amplifies it
 into another stopping point, and a diagnosis' findings then depended on which driver ran a model.
 
 MuJoCo's callbacks are global to the process: use one simulation per process at a time and
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from .friction import lugre_step
+from .friction import lugre_step, stribeck_level
 from .model import ConfigError
 from .params import Friction
 
@@ -189,8 +189,7 @@ class FrictionCallback:
                 speed = abs(v)
                 if advance:
                     state["rest"] = state["rest"] + dt if speed < V_REST else 0.0
-                x = speed / p.v_s
-                level = p.alpha0 + p.alpha1 * float(np.exp(-(x * x)))  # stribeck_level, as BatchFriction computes it
+                level = stribeck_level(speed, p)
                 if law.dwell_gain:
                     level = level * (1.0 + law.dwell_gain * (1.0 - float(np.exp(-state["rest"] / law.dwell_time))))
                 m.dof_frictionloss[dof] = level

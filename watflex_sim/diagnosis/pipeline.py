@@ -200,9 +200,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
     while len(current.effects) < max_effects:
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+        pinned = beyond_tolerance(data, current)
         beyond = []
         if within_noise(train, held):
-            beyond = [] if bounds_tried else beyond_tolerance(data, current)
+            beyond = [] if bounds_tried else pinned
             bounds_tried = True
             if not beyond:
                 say("verdict", f"training {train['noise_ratio']:.2f} x and validation {held['noise_ratio']:.2f} x the noise, "
@@ -242,9 +243,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                                "score": round(r["score"], 4)} for r in fitted])
         # a later finding must remove the excess that asked for its round, but for the effect that frees a rig
         # parameter pinned at its tolerance bound (beyond_tolerance): that is evidence of its own
-        pinned = {(c.effect, c.where) for c in beyond or beyond_tolerance(data, current)}
         best = fitted[0]
-        later = bool(current.effects) and (best["effect"], best["where"]) not in pinned
+        later = bool(current.effects) and (best["effect"], best["where"]) not in {(c.effect, c.where) for c in pinned}
         if _earns_place(best, later):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
             best = _gains(polish(data, runner, best, rig_start={}), train, held)  # {}: the datasheet's values
