@@ -232,6 +232,23 @@ def test_shortlist_swaps_a_candidate_its_simulation_refutes():
     assert [c.effect for c in shortlist([gain, stiffness, cand("other", 0.1, None)])] == ["gain", "stiffness"]
 
 
+def test_shortlist_adds_the_candidate_its_simulations_put_first():
+    """shortlist(): a candidate that rescreen found better than every listed one is fitted too (seed 44,
+    laser_arm-b590ffaa, a beam 0.39 x as stiff as the datasheet: the link's stiffness screened 55 % and
+    simulated 80 %, the hub's compliance 75 % / 70 % and backlash 72 % / 72 %); one simulated no better
+    than the best listed is not."""
+    from watflex_sim.diagnosis import Candidate, shortlist
+
+    def cand(effect, gain, checked):
+        return Candidate(effect, "x", {}, {}, {}, gain=gain, checked=checked)
+
+    ranked = [cand("compliance", 0.7503, 0.7014), cand("backlash", 0.7247, 0.7193), cand("stiffness", 0.5531, 0.7981),
+              cand("damping", 0.2667, 0.2171)]
+    assert [c.effect for c in shortlist(ranked)] == ["compliance", "backlash", "stiffness"]
+    ranked[2] = cand("stiffness", 0.5531, 0.7)
+    assert [c.effect for c in shortlist(ranked)] == ["compliance", "backlash"]
+
+
 def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
     """shortlist(): a linear signature under-rates stick-slip, so the best-screening candidate at the
     leader's place with fewer parameters is fitted too (seed-5 laser case: Coulomb friction, 2
