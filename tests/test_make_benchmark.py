@@ -255,3 +255,21 @@ def test_a_pair_case_carries_both_effects_and_the_recordings_show_both(tmp_path)
                     rms = float(np.sqrt(np.nanmean((sim.channels[c] - x) ** 2)))
                     worst[label] = max(worst[label], rms / noise)
     assert worst["both"] < 1.5 and worst["first"] > 2 * worst["both"], worst
+
+
+def test_the_scorer_names_a_command_delay_where_the_report_does(bench):
+    """score_benchmark.true_place(): a delay the truth puts on "command" is on the command channels the
+    recordings carry, as the report names it (explain.physical_place): the laser arm's voltage_cmd,
+    Watflex's shoulder_torque_cmd+elbow_torque_cmd (seed 46 scored two right delays as wrong places);
+    any other place is the truth's own."""
+    spec = importlib.util.spec_from_file_location("score_benchmark", ROOT / "tools" / "score_benchmark.py")
+    sb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sb)
+    out, truth = bench
+    case = next(c for c in truth["cases"] if c["rig"] == "laser_arm" and c["effect"])
+    recs = [read_recording(out / p) for p in case["recordings"]]
+    assert sb.true_place({**case, "effect": "delay", "where": "command"}, recs) == "voltage_cmd"
+    assert sb.true_place(case, recs) == case["where"]
+    case = next(c for c in truth["cases"] if c["rig"] == "watflex" and c["effect"])
+    recs = [read_recording(out / p) for p in case["recordings"]]
+    assert sb.true_place({**case, "effect": "delay", "where": "command"}, recs) == "shoulder_torque_cmd+elbow_torque_cmd"

@@ -42,6 +42,8 @@ from watflex_sim.diagnosis import diagnose  # noqa: E402
 from watflex_sim.effects import CATALOGUE  # noqa: E402
 from watflex_sim.model import ConfigError  # noqa: E402
 from watflex_sim.recording import read_recording  # noqa: E402
+from watflex_sim.diagnosis.explain import commands_recorded  # noqa: E402
+from watflex_sim.rigdesc import load_rig  # noqa: E402
 
 NONE = "none"
 
@@ -54,6 +56,15 @@ def parameter_error(effect: str, truth: dict, found: dict) -> float | None:
         return None
     largest = max(deviations.values()) or 1.0
     return statistics.mean(abs(found[k] - truth[k]) / (deviations[k] or largest) for k in deviations)
+
+
+def true_place(case: dict, recordings: list) -> str | None:
+    """The truth's place as the report names it: a delay on "command" is on the command channels the
+    recordings carry (explain.physical_place), e.g. the laser's voltage_cmd."""
+    where = case.get("where")
+    if case.get("effect") == "delay" and where == "command":
+        return commands_recorded(load_rig(case["rig"]), recordings) or where
+    return where
 
 
 def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
@@ -73,7 +84,7 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     if kind == "outside_catalogue":
         truth_effect = "unexplained"
     row = {
-        "id": case["id"], "rig": case["rig"], "kind": kind, "truth": truth_effect, "where": case.get("where"),
+        "id": case["id"], "rig": case["rig"], "kind": kind, "truth": truth_effect, "where": true_place(case, recordings),
         "concealment": case.get("concealment", ""), "verdict": report.get("verdict"),
         "proposed": bool(report.get("proposed_experiment")), "covered": [],
         "ours": first["effect"] if first else NONE, "ours_where": first["where"] if first else None,

@@ -45,9 +45,13 @@ def physical_place(data: Data, effect: str, where: str) -> str:
     """Where `effect` acts, named as the rig names it: a delay on 'command' is on the command
     channels the recordings carry; anything else is already a rig place."""
     if effect == "delay" and where == "command":
-        commands = [c for c in data.rig.of_kind("command") if any(c in r.channels for r in data.recordings)]
-        return "+".join(commands) or where
+        return commands_recorded(data.rig, data.recordings) or where
     return where
+
+
+def commands_recorded(rig, recordings) -> str:
+    """The rig's command channels that `recordings` carry, joined by '+' ('' if none)."""
+    return "+".join(c for c in rig.of_kind("command") if any(c in r.channels for r in recordings))
 
 
 def _linear(data: Data, joint: str) -> bool:
