@@ -199,22 +199,28 @@ def test_shortlist_fits_screening_ties_too():
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).
-    Closed form: r(m) = r0 (1 - m / 0.4)^2 at m = 0.1 leaves 0.5625^2 of the cost (gain 0.684, half-way
-    0.414); r(m) = r0 (1 + m) at m = 1 and 0.5 leaves 4 x and 2.25 x (gains -3, -1.25)."""
-    from watflex_sim.diagnosis import Candidate, Model
-    from watflex_sim.diagnosis.screening import rescreen
+    Closed form: r(m) = r0 (1 + m) at m = 1 and 0.5 leaves 4 x and 2.25 x (gains -3, -1.25): no further.
+    r(m) = r0 (1 - m / 0.4)^2 at m = 0.1 leaves 0.5625^2 of the cost (gain 0.684, half-way 0.414): rising,
+    so on to 0.2 (gain 1 - 0.5^4 = 0.9375) and 0.4 (gain 1), where the estimate moves too. r(m) = r0 |1 - m / 3.2|
+    from 0.2: 0.4, 0.8 (FURTHER_STEPS = 2), gain 1 - 0.75^2."""
+    from watflex_sim.diagnosis import Candidate, Model, Slot
+    from watflex_sim.diagnosis.screening import FURTHER_STEPS, rescreen
 
     r0 = np.ones(10)
-    law = {"closer": lambda m: r0 * (1 - m / 0.4) ** 2, "further": lambda m: r0 * (1 + m)}
+    law = {"closer": lambda m: r0 * (1 - m / 0.4) ** 2, "further": lambda m: r0 * (1 + m), "far": lambda m: r0 * abs(1 - m / 3.2)}
 
     def evaluate(models):
         return [law[m.effects[-1]["effect"]](m.effects[-1]["m"]) for m in models]
 
-    closer = Candidate("closer", "x", {"m": 0.2}, {}, {"m": 0.0}, estimate={"m": 0.1}, gain=0.1)
-    further = Candidate("further", "x", {"m": 0.2}, {}, {"m": 0.0}, estimate={"m": 1.0}, gain=0.5)
-    rescreen(evaluate, [closer, further], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
-    assert closer.checked == pytest.approx(1 - 0.5625**2, rel=1e-12)
-    assert further.checked == pytest.approx(1 - 1.5**2, rel=1e-12)
+    def cand(effect, estimate, gain):
+        return Candidate(effect, "x", {"m": 0.2}, {"m": Slot(("effect", -1, "m"), -10.0, 10.0)}, {"m": 0.0},
+                         estimate={"m": estimate}, gain=gain)
+
+    closer, further, far = cand("closer", 0.1, 0.1), cand("further", 1.0, 0.5), cand("far", 0.2, 0.05)
+    rescreen(evaluate, [closer, further, far], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
+    assert closer.checked == pytest.approx(1.0, abs=1e-12) and closer.estimate == {"m": pytest.approx(0.4)}
+    assert further.checked == pytest.approx(1 - 1.5**2, rel=1e-12) and further.estimate == {"m": 1.0}
+    assert FURTHER_STEPS == 2 and far.checked == pytest.approx(1 - 0.75**2, rel=1e-12)
 
 
 def test_shortlist_swaps_a_candidate_its_simulation_refutes():
