@@ -549,8 +549,9 @@ def finer_refit(data: Data, runner: Runner, model: Model, slots: list[Slot], J: 
     rig has no discretisation to refine or the finer model diverges. How far the estimates move is what our
     own discretisation costs them: data from a finer simulator or a continuum (a real rig) pulls them that
     way, which no amount of data averages away. A linearised pull, J's least-squares answer to the finer
-    model's residual change, misses it where dry friction makes the response nonlinear (seed 41, a Watflex
-    elbow Coulomb friction: predicted -0.2 %, the fit at 30 segments and half the step moves it +6 %)."""
+    model's residual change, predicted a quarter of it (seed 41, a Watflex payload 0.5107 kg for 0.5006: pull
+    0.0023 kg; this refit moves it to 0.5067) and the wrong sign for an elbow Coulomb friction, whose valley
+    against the rig's friction scale this refit does not leave either (0.505 -> 0.508 N m for 0.537)."""
     if not any(data.discretisation):
         return None
 

@@ -263,9 +263,12 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, rig_columns: np.ndar
         for values in (cand.estimate, halfway) if halfway != cand.estimate else (cand.estimate,):
             models.append(cand.model(base, values))
             owners.append(cand)
+    def gain_of(r: np.ndarray | None) -> float:
+        return -math.inf if r is None else (cost_rig - refit_cost(rig_columns, r, at, lo, hi)) / cost0
+
     gains: dict[int, list[float]] = {}
     for cand, r in zip(owners, evaluate(models)):
-        gain = -math.inf if r is None else (cost_rig - refit_cost(rig_columns, r, at, lo, hi)) / cost0
+        gain = gain_of(r)
         gains.setdefault(id(cand), []).append(gain)
         if r is not None:
             cand.checked = gain if cand.checked is None else max(cand.checked, gain)
@@ -280,7 +283,7 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, rig_columns: np.ndar
         runs = evaluate([c.model(base, moves[id(c)]) for c in rising])
         better = []
         for cand, r in zip(rising, runs):
-            gain = -math.inf if r is None else (cost_rig - refit_cost(rig_columns, r, at, lo, hi)) / cost0
+            gain = gain_of(r)
             if gain > cand.checked:
                 cand.checked, cand.estimate = gain, moves[id(cand)]
                 better.append(cand)
