@@ -4,9 +4,11 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+import numpy as np
+
 from watflex_sim.params import CONTROL_PERIOD
 
-from .state_feedback import RateFilter
+from .state_feedback import RateColumns, RateFilter
 
 
 class PID:
@@ -47,6 +49,44 @@ class PID:
         if clipped == u:  # anti-windup: integrate only while not saturated
             self.integral += e * self.period
         if self.alpha < 1.0:
+            clipped = clipped if self._out is None else self._out + self.alpha * (clipped - self._out)
+            self._out = clipped
+        return {self.command: clipped}
+
+    @classmethod
+    def columns(cls, members: list["PID"], times: np.ndarray) -> "PIDColumns | None":
+        """The members' law on arrays (lockstep's columns), or None unless they share its form."""
+        first = members[0]
+        names = ("command", "position", "reference", "deflection")
+        if type(first).__call__ is not PID.__call__ or any(
+                type(m).__call__ is not PID.__call__ or any(getattr(m, n) != getattr(first, n) for n in names)
+                or (m.alpha < 1.0) != (first.alpha < 1.0) or m._out is not None or m.integral != 0.0 for m in members):
+            return None
+        rate = RateColumns.of([m.rate for m in members])
+        return None if rate is None else PIDColumns(members, rate)
+
+
+class PIDColumns:
+    """PID of B members at once, on arrays of shape (B,): the same arithmetic, member by member."""
+
+    def __init__(self, members: list[PID], rate: RateColumns):
+        first = members[0]
+        self.command, self.position, self.reference, self.deflection = (first.command, first.position,
+                                                                         first.reference, first.deflection)
+        for name in ("kp", "ki", "kd", "kl", "limit", "period", "alpha"):
+            setattr(self, name, np.array([getattr(m, name) for m in members]))
+        self.rate, self.filtered = rate, first.alpha < 1.0
+        self.integral, self._out = np.zeros(len(members)), None
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        q = obs[self.position]
+        e = (obs[self.reference] if self.reference else 0.0) - q
+        u = self.kp * e + self.ki * self.integral - self.kd * self.rate(q)
+        if self.deflection:
+            u = u - self.kl * obs[self.deflection]
+        clipped = np.maximum(-self.limit, np.minimum(self.limit, u))
+        self.integral = np.where(clipped == u, self.integral + e * self.period, self.integral)
+        if self.filtered:
             clipped = clipped if self._out is None else self._out + self.alpha * (clipped - self._out)
             self._out = clipped
         return {self.command: clipped}

@@ -4,11 +4,12 @@ from __future__ import annotations
 import math
 from typing import Mapping, Sequence
 
+import numpy as np
 from scipy import signal
 
 from watflex_sim.params import CONTROL_PERIOD
 
-from .filters import Butterworth2
+from .filters import Butterworth2, Butterworth2Columns
 
 
 class RateFilter:
@@ -55,6 +56,42 @@ class RateFilter:
             rate = (value - self.x[0]) / (self.taps * self.period) if len(self.x) > self.taps else 0.0
             return self.smooth(rate) if self.smooth else rate
         if self.x is None:  # at rest at the first value
+            self.x = [value] * len(self.b)
+        self.x = [value] + self.x[:-1]
+        y = sum(b * x for b, x in zip(self.b, self.x)) - sum(a * y for a, y in zip(self.a, self.y))
+        if self.y:
+            self.y = [y] + self.y[:-1]
+        return y
+
+
+class RateColumns:
+    """RateFilter of B members at once, on arrays of shape (B,): the same arithmetic, member by member
+    (lockstep's columns). `of` gives None unless the members share a form (method, taps, filter order)."""
+
+    @staticmethod
+    def of(members: list[RateFilter]) -> "RateColumns | None":
+        first = members[0]
+        same = all(m.plain == first.plain and m.taps == first.taps and (m.smooth is None) == (first.smooth is None)
+                   and (m.plain or (len(m.b), len(m.a)) == (len(first.b), len(first.a))) and m.x is None for m in members)
+        return RateColumns(members) if same else None
+
+    def __init__(self, members: list[RateFilter]):
+        first = members[0]
+        self.plain, self.taps = first.plain, first.taps
+        self.span = np.array([m.taps * m.period for m in members])  # s: the time the difference spans
+        self.smooth = Butterworth2Columns([m.smooth for m in members]) if first.smooth else None
+        if not self.plain:
+            self.b = [np.array([m.b[i] for m in members]) for i in range(len(first.b))]
+            self.a = [np.array([m.a[i] for m in members]) for i in range(len(first.a))]
+            self.y = [np.zeros(len(members)) for _ in self.a]
+        self.x: list[np.ndarray] | None = None
+
+    def __call__(self, value: np.ndarray) -> np.ndarray:
+        if self.plain:
+            self.x = ([] if self.x is None else self.x)[-self.taps:] + [value]
+            rate = (value - self.x[0]) / self.span if len(self.x) > self.taps else np.zeros_like(value)
+            return self.smooth(rate) if self.smooth else rate
+        if self.x is None:
             self.x = [value] * len(self.b)
         self.x = [value] + self.x[:-1]
         y = sum(b * x for b, x in zip(self.b, self.x)) - sum(a * y for a, y in zip(self.a, self.y))
@@ -113,6 +150,45 @@ class StateFeedback:
             error.append(ref - x)
         u = [max(-lim, min(lim, sum(k * e for k, e in zip(row, error)))) for row, lim in zip(self.gains, self.limits)]
         if self.alpha < 1.0:
+            u = u if self._out is None else [y + self.alpha * (v - y) for v, y in zip(u, self._out)]
+            self._out = u
+        return dict(zip(self.commands, u))
+
+    @classmethod
+    def columns(cls, members: list["StateFeedback"], times: np.ndarray) -> "StateFeedbackColumns | None":
+        """The members' law on arrays (lockstep's columns), or None unless they share its form."""
+        first = members[0]
+        if type(first).__call__ is not StateFeedback.__call__ or any(
+                type(m) is not type(first) or m.commands != first.commands or m.states != first.states
+                or m.references != first.references or (m.alpha < 1.0) != (first.alpha < 1.0) or m._out is not None
+                for m in members):
+            return None
+        rates = {s: RateColumns.of([m.rates[s] for m in members]) for s in first.rates}
+        return None if any(r is None for r in rates.values()) else StateFeedbackColumns(members, rates)
+
+
+class StateFeedbackColumns:
+    """StateFeedback of B members at once, on arrays of shape (B,): the same arithmetic, member by member."""
+
+    def __init__(self, members: list[StateFeedback], rates: dict[str, RateColumns]):
+        first = members[0]
+        self.commands, self.states, self.references, self.rates = first.commands, first.states, first.references, rates
+        self.gains = [[np.array([m.gains[r][c] for m in members]) for c in range(len(first.states))]
+                      for r in range(len(first.commands))]
+        self.limits = [np.array([m.limits[r] for m in members]) for r in range(len(first.commands))]
+        self.alpha = np.array([m.alpha for m in members])
+        self.filtered = first.alpha < 1.0
+        self._out = None
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        error = []
+        for s in self.states:
+            x = self.rates[s](obs[s[5:]]) if s in self.rates else obs[s]
+            ref = obs[self.references[s]] if s in self.references else 0.0
+            error.append(ref - x)
+        u = [np.maximum(-lim, np.minimum(lim, sum(k * e for k, e in zip(row, error))))
+             for row, lim in zip(self.gains, self.limits)]
+        if self.filtered:
             u = u if self._out is None else [y + self.alpha * (v - y) for v, y in zip(u, self._out)]
             self._out = u
         return dict(zip(self.commands, u))

@@ -119,17 +119,62 @@ def test_a_model_that_cannot_be_built_fails_alone_in_a_resimulation_batch():
 def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
     """lockstep._pays (tools/bench.py section 6): a batch pays a fixed cost per Batch.step call and tick,
     and joint friction makes one call per physics step (the laser arm: 10 a tick). Measured on one thread,
-    lockstep / one by one: Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from 8; the laser arm with hub friction
-    1.6-3.4 at B = 2-4, ~1 at 8-16, 0.75-0.83 at 32. So 8 Watflex runs (nominal joint friction, 2 calls a
-    tick) or 8 frictionless laser runs go in lockstep, 16 laser runs with hub friction one by one, 30 of them
-    in lockstep."""
+    1 s runs, lockstep / one by one, with the control half on arrays (columns.py): Watflex 1.13 at B = 4, 0.92
+    at 6; the laser arm 1.02 at 4, 0.96 at 6; with hub friction 1.04 at 6, 0.95 at 8, 0.90 at 10. With each
+    member's own control half (an effect on it, here a sensor offset): Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from
+    8; the laser arm with hub friction ~1 at 8-16, 0.75-0.83 at 32."""
     from watflex_sim.engine import ControlLoop
     from watflex_sim.lockstep import _pays
 
     def loops(name, n, sets=()):
         return [ControlLoop(load_scenario(name, ["duration_s=0.1", f"seed={i}", *sets])) for i in range(n)]
 
-    coulomb = "effects=[{effect='coulomb_friction', where='hub', torque_positive=0.02, torque_negative=0.03}]"
-    assert _pays(loops("watflex_elbow_step", 8)) and not _pays(loops("watflex_elbow_step", 4))
-    assert _pays(loops("laser_arm_step", 8)) and not _pays(loops("laser_arm_step", 4))
-    assert not _pays(loops("laser_arm_step", 16, [coulomb])) and _pays(loops("laser_arm_step", 30, [coulomb]))
+    coulomb = "{effect='coulomb_friction', where='hub', torque_positive=0.02, torque_negative=0.03}"
+    offset = "{effect='sensor_offset', where='hub_angle', offset=0.001}"
+    assert _pays(loops("watflex_elbow_step", 6)) and not _pays(loops("watflex_elbow_step", 4))
+    assert _pays(loops("laser_arm_step", 6)) and not _pays(loops("laser_arm_step", 4))
+    assert not _pays(loops("laser_arm_step", 8, [f"effects=[{coulomb}]"]))
+    assert _pays(loops("laser_arm_step", 10, [f"effects=[{coulomb}]"]))
+    assert not _pays(loops("laser_arm_step", 16, [f"effects=[{coulomb}, {offset}]"]))
+    assert _pays(loops("laser_arm_step", 30, [f"effects=[{coulomb}, {offset}]"]))
+
+
+def test_the_control_half_on_arrays_matches_single_runs(monkeypatch):
+    """columns.py: the rigs' sensors and converters and the controllers' column forms (open loop, pd_joint's
+    Butterworth-filtered difference, PID with integral, limit and command filter, state feedback through a
+    discretised rate filter, pd_tip with a difference) give each member the single run's numbers, bit for bit;
+    the spy makes sure every case really ran on arrays."""
+    from watflex_sim import lockstep
+
+    built = []
+    original = lockstep.ColumnControl.of
+    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: built.append(original(*a)) or built[-1])
+    pid = ("controller={type='pid', command='elbow_torque_cmd', position='elbow_angle', reference='elbow_reference', "
+           "kp=60.0, ki=40.0, kd=12.0, rate_hz=30.0, limit=1.5, command_filter_hz=80.0}")
+    feedback = ("controller={type='state_feedback', commands=['elbow_torque_cmd'], states=['elbow_angle', "
+                "'rate:elbow_angle'], gains=[[60.0, 12.0]], references={elbow_angle='elbow_reference'}, rate_hz=40.0, "
+                "rate_method='bilinear', command_filter_hz=100.0}")
+    cases = [("watflex_elbow_triangle", []), ("watflex_elbow_staircase", []), ("watflex_elbow_step", [pid]),
+             ("watflex_elbow_step", [feedback]), ("laser_arm_step", ["controller.kd=0.002"])]
+    for name, sets in cases:
+        built.clear()
+        _compare([load_scenario(name, ["duration_s=0.5", f"seed={s}", *sets]) for s in (1, 2)])
+        assert built and all(c is not None for c in built), name
+
+
+def test_a_diagnosis_resimulation_batch_runs_on_arrays_and_matches_single_runs(monkeypatch):
+    """resim.resimulate_many, as the diagnosis calls it: one laser-arm recording re-simulated with six refit
+    models (ratios of the beam's stiffness) in lockstep, on arrays, equals each re-simulated alone."""
+    from watflex_sim import lockstep
+    from watflex_sim.resim import resimulate, resimulate_many
+
+    built = []
+    original = lockstep.ColumnControl.of
+    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: built.append(original(*a)) or built[-1])
+    rec = simulate(load_scenario("laser_arm_step", ["duration_s=0.5", "seed=4"])).recording
+    ratios = [0.97, 0.99, 1.0, 1.01, 1.02, 1.04]
+    together = resimulate_many([(rec, [], {"beam_EI": r}) for r in ratios], nthread=1)
+    assert len(built) == 1 and built[0] is not None
+    for r, sim in zip(ratios, together):
+        alone = resimulate(rec, [], {"beam_EI": r})
+        assert all(np.array_equal(sim.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels), r

@@ -151,8 +151,11 @@ class GrowthMonitor:
         if k % 2:
             v = data.qvel[self.dofs]
             self.current = max(self.current, float(v @ v))
-        if (k + 1) % self.WINDOW:
-            return
+        if (k + 1) % self.WINDOW == 0:
+            self.close_window(k)
+
+    def close_window(self, k: int) -> None:
+        """End the window that closes after control period k: count growth, raise if it is exponential."""
         if self.current > self.GROWTH * self.previous:
             self.run += 1
             self.rates = (self.rates + [math.log(self.current / self.previous) if self.previous else math.inf])[-self.RUN:]
@@ -403,6 +406,7 @@ class Tape:
         self.loop, rig = loop, loop.rig
         self.names = tuple(rig.channels)
         self.rows: list[list[float] | None] = [None] * loop.n_ticks  # per tick, a value per channel (NaN: none)
+        self.table: np.ndarray | None = None  # (ticks, channels), where columns.py wrote it instead of rows
         self.frame_every = max(1, int(round(1.0 / (loop.scenario["frame_rate_hz"] * loop.period))))
         self.frame_ticks = range(0, loop.n_ticks, self.frame_every)
         self.frames = np.empty((len(self.frame_ticks), *np.shape(rig.arm_points())))
@@ -422,7 +426,8 @@ class Tape:
         loop, scenario, period = self.loop, self.loop.scenario, self.loop.period
         n_ticks = loop.n_ticks
         empty = [math.nan] * len(self.names)
-        table = np.array([row or empty for row in self.rows], dtype=float).reshape(n_ticks, len(self.names))
+        table = (self.table if self.table is not None else
+                 np.array([row or empty for row in self.rows], dtype=float).reshape(n_ticks, len(self.names)))
         channels = {c: np.ascontiguousarray(table[:, j]) for j, c in enumerate(self.names) if not np.isnan(table[:, j]).all()}
         controller_meta = dict(scenario["controller"])
         meta = {

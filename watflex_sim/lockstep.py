@@ -19,6 +19,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from .engine import CHECK_EVERY, MAX_QVEL, ControlLoop, SimResult, SimulationError, Tape, run
+from .columns import ColumnControl
 from .joint_friction import BatchFriction
 from .rigdesc import RigDescription
 
@@ -26,6 +27,7 @@ log = logging.getLogger(__name__)
 
 LOCKSTEP_LEAST = 8  # simulations of one structure below which the single-run driver is cheaper
 LOCKSTEP_PER_CALL = 3  # ... and per Batch.step call a tick (_pays)
+COLUMNS_LEAST, COLUMNS_PER_CALL = 6, 1  # the same where the control half runs on arrays (columns.py)
 _ROWS = ("qpos", "qvel", "ctrl", "xpos", "site_xpos")  # the MjData fields rigs and the loop touch
 _SIZES = ("nq", "nv", "nu", "na", "nbody", "njnt", "ngeom", "nsite", "nsensordata", "neq", "ntendon",
           "nmocap", "nuserdata", "nM", "nD", "nB", "nC", "nJmom", "nbvh", "nbvhstatic", "nbvhdynamic", "npair",
@@ -80,6 +82,8 @@ def _pays(loops: list[ControlLoop]) -> bool:
     B = 4-8, 1.02 at 16, 0.75 at 32; without friction (1 call) 0.90-0.93 at 16-32."""
     substepped = any(loop.friction.joints for loop in loops) or any(loop.delays is not None for loop in loops)
     calls = loops[0].n_sub if substepped else 1  # Batch.step calls per tick
+    if ColumnControl.fits(loops):
+        return len(loops) >= max(COLUMNS_LEAST, COLUMNS_PER_CALL * calls)
     return len(loops) >= max(LOCKSTEP_LEAST, LOCKSTEP_PER_CALL * calls)
 
 
@@ -99,9 +103,12 @@ class _Lockstep:
         self.batch = batch = mjbatch.Batch(first, len(loops), nthread=nthread)
         for field in sorted(mjbatch.MODEL_FIELDS):  # per-simulation values where the models differ
             values = [_model_field(loop.model, field) for loop in loops]
-            if values[0] is None or all(np.array_equal(v, values[0]) for v in values[1:]):
+            if values[0] is None:
                 continue
-            batch.expand(field)[:] = np.array(values).reshape(batch.expand(field).shape)
+            stacked = np.array(values)
+            if (stacked == stacked[0]).all():
+                continue
+            batch.expand(field)[:] = stacked.reshape(batch.expand(field).shape)
         friction = [loop.friction for loop in loops]
         self.friction = None
         if any(f.joints for f in friction):
@@ -126,23 +133,33 @@ class _Lockstep:
             if tip >= 0:
                 loop.rig._tip_xpos = rows.site_xpos[tip]
         batch.forward(stage=mujoco.mjtStage.mjSTAGE_POS)  # positions for the first sensors and frames
+        self.columns = ColumnControl.of(loops, arrays, tip)  # the control half on arrays, where it has that form
 
     def run(self) -> list[SimResult | SimulationError]:
-        loops, batch = self.loops, self.batch
+        loops, batch, columns = self.loops, self.batch, self.columns
         tapes = [Tape(loop) for loop in loops]
         n_sub = loops[0].n_sub
         failed: dict[int, SimulationError] = {}
+        ends = {loop.n_ticks for loop in loops}
+        reads = {(loop.rig.positions_every, tape.frame_every) for loop, tape in zip(loops, tapes)}
+        live, ids, dropped = list(range(len(loops))), None, 0
         start = wallclock.perf_counter()
-        for k in range(max(loop.n_ticks for loop in loops)):
-            live = [i for i, loop in enumerate(loops) if k < loop.n_ticks and i not in failed]
+        for k in range(max(ends)):
+            if k in ends or len(failed) != dropped:  # members that ended or failed leave the batch
+                live = [i for i, loop in enumerate(loops) if k < loop.n_ticks and i not in failed]
+                ids, dropped = (np.array(live) if len(live) < len(loops) else None), len(failed)
             if not live:
                 break
-            for i in live:
-                tapes[i].frame(k)
-                tapes[i].write(k, *loops[i].control(k))
-            ids = np.array(live) if len(live) < len(loops) else None
+            if any(k % every == 0 for _, every in reads):
+                for i in live:
+                    tapes[i].frame(k)
+            if columns is not None:
+                columns.tick(k)
+            else:
+                for i in live:
+                    tapes[i].write(k, *loops[i].control(k))
             # positions after the tick (engine: mj_kinematics) only where the next tick reads them
-            positions = any(_reads_positions(loops[i], tapes[i], k + 1) for i in live)
+            positions = any((every and (k + 1) % every == 0) or (k + 1) % frames == 0 for every, frames in reads)
             for j in range(n_sub):
                 self._forces()
                 if self.jittered:  # a command due at substep j reaches its plant now
@@ -162,16 +179,22 @@ class _Lockstep:
                     self.constraint[:] = self.bound_constraint
                 if last:
                     break
-            for i in live:
-                try:
-                    loops[i].monitor.update(loops[i].data, k)
-                except SimulationError as exc:
-                    failed[i] = exc
-            if k % CHECK_EVERY == CHECK_EVERY - 1 or k in {loop.n_ticks - 1 for loop in loops}:
+            if columns is not None:
+                columns.growth.update(k, live, failed)
+            else:
+                for i in live:
+                    try:
+                        loops[i].monitor.update(loops[i].data, k)
+                    except SimulationError as exc:
+                        failed[i] = exc
+            if k % CHECK_EVERY == CHECK_EVERY - 1 or k + 1 in ends:
                 self._check(live, k, failed)
         wall = (wallclock.perf_counter() - start) / len(loops)  # s per simulation
         for i, exc in failed.items():
             log.info("%s dropped from its batch: %s", loops[i].scenario["name"], exc)
+        if columns is not None:
+            for i, (loop, tape) in enumerate(zip(loops, tapes)):
+                tape.table = columns.member_table(i, loop.n_ticks)
         return [failed.get(i) or tape.result(wall) for i, tape in enumerate(tapes)]
 
     def _forces(self) -> None:
@@ -194,12 +217,6 @@ class _Lockstep:
                 cause = "a MuJoCo warning" if warned[i] else f"velocity not finite or above {MAX_QVEL:g}"
                 failed[i] = SimulationError(f"simulation diverged (detected at t = {t:.3f} s): {cause}; "
                                             "try a smaller timestep or lower gains; nothing was written")
-
-
-def _reads_positions(loop: ControlLoop, tape: Tape, k: int) -> bool:
-    """Whether tick k's sensors or arm drawing read body or site positions (the rig's positions_every)."""
-    every = loop.rig.positions_every
-    return (every and k % every == 0) or k % tape.frame_every == 0
 
 
 def _model_field(model: mujoco.MjModel, field: str):

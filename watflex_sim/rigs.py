@@ -39,6 +39,14 @@ class NoiseStream:
             self._block = self._draw(self.BLOCK).tolist()[::-1]
         return self._block.pop()
 
+    def take(self, n: int) -> np.ndarray:
+        """The next n draws at once: the numbers n calls would give, in order (columns.py)."""
+        out = self._block[::-1]  # the pending draws, next first
+        while len(out) < n:
+            out += self._draw(self.BLOCK).tolist()
+        self._block = out[n:][::-1]
+        return np.array(out[:n], dtype=float)
+
 
 class Rig:
     """Common part: model, data, seeded noise streams, the arm's drawing points."""
