@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from .engine import GrowthMonitor, SimulationError
-from .rigs import LaserArmRig, WatflexRig
+from .rigs import GenericRig, LaserArmRig, WatflexRig
 
 
 def _per_member(rigs: list, value) -> np.ndarray:
@@ -140,6 +140,93 @@ class WatflexColumns:
         return {}
 
 
+class GenericColumns:
+    """GenericRig's observe / actuate for B members: a rig described as data (rigdesc; docs/rigs.md)."""
+
+    def __init__(self, rigs: list[GenericRig], arrays: dict[str, np.ndarray], tip: int, n: int):
+        first = rigs[0]
+        self.qpos, self.qvel, self.ctrl, self.applied = arrays["qpos"], arrays["qvel"], arrays["ctrl"], arrays["qfrc_applied"]
+        self.inputs, self.disturbances = first._inputs, first._disturbances
+        self.measured = []  # (channel, kind, index, per-member numbers, filter), in the rig's order
+        noisy = [[m[6] != 0 for m in r._measured] for r in rigs]
+        draws = [r.gauss.take(n * sum(flags)).reshape(n, -1) for r, flags in zip(rigs, noisy)]
+        self.gauss = np.zeros((n, len(first._measured), len(rigs)))  # (tick, channel, member); 0 where no noise
+        for i, flags in enumerate(noisy):
+            self.gauss[:, np.flatnonzero(flags), i] = draws[i]
+        for m, (channel, kind, index, *_rest) in enumerate(first._measured):
+            numbers = {name: _per_member(rigs, lambda r, k=k: r._measured[m][k])
+                       for k, name in ((3, "scale"), (4, "offset"), (5, "step"), (6, "noise"))}
+            if kind == "current":
+                numbers |= {name: _per_member(rigs, lambda r, k=k: r._measured[m][2][k])
+                            for k, name in ((2, "low"), (3, "high"), (4, "emf"), (5, "per_input"), (6, "most"))}
+                index = index[:2]  # actuator, dof
+            elif kind == "link":
+                numbers["weights"] = [_per_member(rigs, lambda r, k=k: r._measured[m][2][k][1]) for k in range(len(index))]
+                index = [q for q, _w in index]
+            alpha = first._measured[m][7]
+            coefficients = None if alpha is None else tuple([_per_member(rigs, lambda r, a=a, k=k: r._measured[m][7][a][k])
+                                                             for k in range(len(alpha[a]))] for a in (0, 1))
+            self.measured.append((channel, kind, index, numbers, coefficients))
+        self.filtered: dict[str, tuple[list, list]] = {}
+        self.commands = [(channel, actuator, *(_per_member(rigs, lambda r, c=channel, k=k: r._commands[c][k]) for k in (1, 2, 3)))
+                         for channel, (actuator, *_rest) in first._commands.items()]  # gain, limit, step
+
+    @staticmethod
+    def fits(rigs: list[GenericRig]) -> bool:
+        """Whether the members share channels, kinds, places, filter orders and converters, and have not run yet."""
+        def form(r):
+            return ([(c, k, i[:2] if k == "current" else [q for q, _w in i] if k == "link" else i,
+                      None if a is None else (len(a[0]), len(a[1])), bool(st)) for c, k, i, _s, _o, st, _n, a in r._measured],
+                    [(c, a, bool(st)) for c, (a, _g, _l, st) in r._commands.items()], r._inputs, r._disturbances)
+        return all(form(r) == form(rigs[0]) and not r._filtered for r in rigs)
+
+    def observe(self, k: int, refs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        obs = {c: refs.get(c, 0.0) for c in self.inputs}
+        for channel, dof in self.disturbances.items():
+            self.applied[:, dof] = obs[channel]
+        qpos, qvel = self.qpos, self.qvel
+        for m, (channel, kind, index, numbers, coefficients) in enumerate(self.measured):
+            if kind == "position":
+                x = qpos[:, index]
+            elif kind == "velocity":
+                x = qvel[:, index]
+            elif kind == "current":
+                actuator, dof = index
+                u = np.minimum(numbers["high"], np.maximum(numbers["low"], self.ctrl[:, actuator]))
+                x = np.clip((u - numbers["emf"] * qvel[:, dof]) * numbers["per_input"], -numbers["most"], numbers["most"])
+            else:
+                x = sum(w * qpos[:, q] for q, w in zip(index, numbers["weights"]))
+            value = numbers["scale"] * x + numbers["offset"] + numbers["noise"] * self.gauss[k, m]
+            if coefficients is not None:
+                value = self._filter(channel, coefficients, value)
+            step = numbers["step"]
+            obs[channel] = np.where(step != 0, step * np.round(value / np.where(step != 0, step, 1.0)), value)
+        return obs
+
+    def _filter(self, channel: str, coefficients, value: np.ndarray) -> np.ndarray:
+        b, a = coefficients
+        x, y = self.filtered.setdefault(channel, ([value] * len(b), [value] * (len(a) - 1)))
+        x.insert(0, value)
+        x.pop()
+        out = sum(bi * xi for bi, xi in zip(b, x)) - sum(ai * yi for ai, yi in zip(a[1:], y))
+        if y:
+            y.insert(0, out)
+            y.pop()
+        return out
+
+    def actuate(self, command: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out = {}
+        for channel, actuator, gain, limit, step in self.commands:
+            u = np.clip(command.get(channel, 0.0), -limit, limit)
+            u = np.where(step != 0, step * np.round(u / np.where(step != 0, step, 1.0)), u)
+            self.ctrl[:, actuator] = gain * u
+            out[channel] = u
+        return out
+
+    def monitor(self, k: int) -> dict[str, np.ndarray]:
+        return {}
+
+
 class GrowthColumns:
     """engine.GrowthMonitor for B members: the energy sampled on arrays, each member's window logic its own
     (the energy summed by numpy, not BLAS: an ulp apart at most, which moves no window's verdict)."""
@@ -164,7 +251,7 @@ class GrowthColumns:
         self.current[:] = 0.0
 
 
-FORMS = {LaserArmRig: LaserColumns, WatflexRig: WatflexColumns}
+FORMS = {LaserArmRig: LaserColumns, WatflexRig: WatflexColumns, GenericRig: GenericColumns}
 
 
 class ColumnControl:
@@ -184,7 +271,7 @@ class ColumnControl:
                or set(loop.references.columns) != set(first.references.columns)
                or not np.array_equal(loop.monitor.dofs, first.monitor.dofs) for loop in loops):
             return False
-        if form is WatflexColumns and not WatflexColumns.fits([loop.rig for loop in loops]):
+        if hasattr(form, "fits") and not form.fits([loop.rig for loop in loops]):
             return False
         return getattr(type(first.controller), "columns", None) is not None
 
