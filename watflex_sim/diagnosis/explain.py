@@ -10,7 +10,7 @@ on a linear axis), and adds a current in A where the rig says how much current a
 from __future__ import annotations
 
 from ..effects import CATALOGUE
-from .data import Data
+from .data import Data, scale_of
 
 EXPLAIN = {
     "coulomb_friction": "dry friction at {where}: it sticks below {torque_positive:.3g} (positive) / {torque_negative:.3g} (negative) and slides against that level",
@@ -125,3 +125,14 @@ def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list
           f"without this one in the final model validation would be {s['held_without']:.4f} ({s['ablated']:.2f} x the noise).",
         "delta_fit": s["held_without"] - s["held_after"],  # validation NRMSE this finding removes from the final model
     }
+
+
+def indistinct(data: Data, effect: dict, intervals: dict[str, tuple[float, float]]) -> bool:
+    """Whether the 95 % interval of every parameter of `effect` that has a value at which the effect vanishes
+    (the catalogue's `neutral`: no friction, a ratio of 1) includes that value: the data cannot tell the finding
+    from no effect at all. False for an effect without such a parameter (a backlash, a compliance, a limit) or
+    without intervals."""
+    checks = [lo <= (p.neutral and p.neutral * scale_of(data, p, effect["where"])) <= hi
+              for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None
+              for lo, hi in [intervals.get(p.name) or (None, None)] if lo is not None]
+    return bool(checks) and all(checks)

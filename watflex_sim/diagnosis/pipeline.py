@@ -23,7 +23,7 @@ from ..model import ConfigError
 from ..recording import Recording
 from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
-from .explain import finding, units_at
+from .explain import finding, indistinct, units_at
 from .fitting import Slot, compass, intervals, jacobian, levenberg, rig_slots, unpack, value_of
 from .locate import locate
 from .runner import Runner, evaluator
@@ -283,17 +283,32 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
         sims = runner.simulate(current) or sims
-    current, sims, ablated = eliminate(data, runner, current, sims, say)
-    if len(current.effects) < found:
-        steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
-    train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
-    trained = current
-    if current.effects:
-        say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")
-        current, sims = final_refit(data, runner, current, sims)
-        steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
-    say("intervals", "95 % intervals from the Jacobian at the final model and the training-only fit")
-    ranges = final_intervals(data, runner, current, sims, trained)
+    while True:  # until every finding's intervals tell it from no effect (explain.indistinct)
+        current, sims, ablated = eliminate(data, runner, current, sims, say)
+        if len(current.effects) < found:
+            steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
+        train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
+        trained = current
+        if current.effects:
+            say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")
+            current, sims = final_refit(data, runner, current, sims)
+            steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
+        say("intervals", "95 % intervals from the Jacobian at the final model and the training-only fit")
+        ranges = final_intervals(data, runner, current, sims, trained)
+        # an effect on a rig parameter's knob has the width of that parameter's tolerance in its interval (the data fix
+        # their product: tie_knob_columns), so only the others are judged by theirs
+        vague = [i for i, effect in enumerate(current.effects)
+                 if knob_partner(data, effect) is None and indistinct(data, effect, ranges.get(i, {}))]
+        if not vague:
+            break
+        say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
+                                                   for i in vague) + ": its 95 % intervals include no effect at all")
+        rejected += [{"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
+                      "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
+                      "intervals": ranges.get(i, {}), "why": "its 95 % intervals include no effect at all"} for i in vague]
+        found = len(trained.effects)
+        current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
+        sims = runner.simulate(current) or sims
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []
     for i, effect in sorted(enumerate(current.effects), key=lambda ie: -ablated[ie[0]]["noise_ratio"]):
