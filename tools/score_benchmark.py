@@ -21,7 +21,9 @@ Parameter error of a finding that names the right effect: for each true paramete
 |found - true| / |true - neutral| (neutral: the value at which the effect vanishes, effects.py;
 for a parameter whose true value is neutral, e.g. the zero side of a one-direction friction,
 relative to the largest true deviation of the effect); the case's error is the mean over them (over both
-true effects, each matched by name among the findings, in a two-effect case).
+true effects, each matched by name among the findings, in a two-effect case). The truth is compared in the form
+the report gives (effects.canonical: a position-dependent friction with a negative amplitude as the same torque
+with a positive one, its phase moved by pi).
 Results are also written to BENCH_DIR/score.json, each case's whole report to BENCH_DIR/reports/ID.json.
 """
 from __future__ import annotations
@@ -39,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from watflex_sim import SimulationError  # noqa: E402
 from watflex_sim.diagnosis import diagnose  # noqa: E402
-from watflex_sim.effects import CATALOGUE  # noqa: E402
+from watflex_sim.effects import CATALOGUE, canonical  # noqa: E402
 from watflex_sim.model import ConfigError  # noqa: E402
 from watflex_sim.recording import read_recording  # noqa: E402
 from watflex_sim.diagnosis.explain import commands_recorded  # noqa: E402
@@ -100,11 +102,11 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool) -> dict:
     scored_truths = truths if first and truth_effect in CATALOGUE else []
     for truth in scored_truths:  # a true effect anywhere among the findings counts for the error
         match = next((f for f in report["findings"] if f["effect"] == truth["effect"]), None)
-        if match:
-            errors.append(parameter_error(truth["effect"], truth["parameters"], match["parameters"]))
-            row.setdefault("found", {"true": truth["parameters"], "found": match["parameters"], "intervals": match.get("intervals", {})})
-            row["covered"] += [lo <= truth["parameters"][k] <= hi for k, (lo, hi) in match.get("intervals", {}).items()
-                               if k in truth["parameters"]]
+        if match:  # the truth in the form the report gives (effects.canonical: one form for the same physics)
+            true = {k: v for k, v in canonical({"effect": truth["effect"], **truth["parameters"]}).items() if k != "effect"}
+            errors.append(parameter_error(truth["effect"], true, match["parameters"]))
+            row.setdefault("found", {"true": true, "found": match["parameters"], "intervals": match.get("intervals", {})})
+            row["covered"] += [lo <= true[k] <= hi for k, (lo, hi) in match.get("intervals", {}).items() if k in true]
     errors = [e for e in errors if e is not None]
     row["error"] = statistics.mean(errors) if errors else None
     proposal = report.get("proposed_experiment") or {}

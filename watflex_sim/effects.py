@@ -206,6 +206,15 @@ def position_dependent_friction(patch, where, amplitude, period=2 * math.pi, pha
         ripple_amplitude=amplitude, ripple_period=period, ripple_phase=phase, spring=spring)
 
 
+def canonical(effect: dict) -> dict:
+    """The same physics in the one form reported where a catalogue parameterisation has two: a position-dependent
+    friction's a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), the phase kept within (-pi, pi]."""
+    if effect.get("effect") != "position_dependent_friction" or effect.get("amplitude", 0.0) >= 0:
+        return effect
+    phase = effect.get("phase", 0.0)
+    return {**effect, "amplitude": -effect["amplitude"], "phase": phase + (math.pi if phase <= 0 else -math.pi)}
+
+
 EXTRA_HINGE_ARMATURE = 5e-3  # kg m^2: the clamp between the two hinges in series [ours]; keeps
 # sqrt(k / armature) * dt < 1 for k up to 2e4 N m/rad at Watflex's 0.5 ms (5e5 at the laser's 0.1 ms)
 LIMIT_SOLREF = [0.002, 1.0]  # s, damping ratio: a hard dead-band stop (MuJoCo's default 0.02 s is a soft spring)

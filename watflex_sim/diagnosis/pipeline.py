@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from ..effects import CATALOGUE
+from ..effects import CATALOGUE, canonical
 from ..engine import SimulationError
 from ..model import ConfigError
 from ..recording import Recording
@@ -309,6 +309,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         found = len(trained.effects)
         current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
         sims = runner.simulate(current) or sims
+    current, ranges = _canonical(current, ranges)
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []
     for i, effect in sorted(enumerate(current.effects), key=lambda ie: -ablated[ie[0]]["noise_ratio"]):
@@ -359,6 +360,24 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         say("experiment", f"simulating {len(alternatives) + 1} explanations on the rig's experiment menu")
         report["proposed_experiment"] = propose_experiment(data, current, alternatives, runner)
     return report
+
+
+def _canonical(model: Model, ranges: dict[int, dict]) -> tuple[Model, dict[int, dict]]:
+    """The model's effects in their canonical form (effects.canonical: the same physics), intervals moved with
+    them: a parameter whose sign flipped gets (-high, -low), one that was shifted is shifted by as much."""
+    effects, moved = [], {}
+    for i, effect in enumerate(model.effects):
+        new = canonical(effect)
+        effects.append(new)
+        moved[i] = {}
+        for name, (lo, hi) in ranges.get(i, {}).items():
+            old, now = effect.get(name), new.get(name)
+            if old is not None and now is not None and now == -old and now != old:
+                lo, hi = -hi, -lo
+            elif old is not None and now is not None:
+                lo, hi = lo + (now - old), hi + (now - old)
+            moved[i][name] = (lo, hi)
+    return Model(effects, dict(model.parameters)), moved
 
 
 def _noise_table(data: Data) -> list[dict]:
