@@ -20,26 +20,17 @@ class Butterworth2:
     def reset(self) -> None:
         self.z1 = self.z2 = None
 
+    @classmethod
+    def columns(cls, members: list["Butterworth2"]) -> "Butterworth2":
+        """The members as one filter on arrays of shape (B,): their coefficients as arrays, the same arithmetic."""
+        out = cls.__new__(cls)
+        for name in ("b0", "b1", "b2", "a1", "a2"):
+            setattr(out, name, np.array([getattr(m, name) for m in members]))
+        out.reset()
+        return out
+
     def __call__(self, x: float) -> float:
         if self.z1 is None:  # steady state for a constant input x
-            self.z1 = x * (1.0 - self.b0)
-            self.z2 = x * (self.b2 - self.a2)
-        y = self.b0 * x + self.z1
-        self.z1 = self.b1 * x - self.a1 * y + self.z2
-        self.z2 = self.b2 * x - self.a2 * y
-        return y
-
-
-class Butterworth2Columns:
-    """Butterworth2 of B members at once, on arrays of shape (B,): the same arithmetic, member by member."""
-
-    def __init__(self, members: list[Butterworth2]):
-        for name in ("b0", "b1", "b2", "a1", "a2"):
-            setattr(self, name, np.array([getattr(m, name) for m in members]))
-        self.z1 = self.z2 = None
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        if self.z1 is None:
             self.z1 = x * (1.0 - self.b0)
             self.z2 = x * (self.b2 - self.a2)
         y = self.b0 * x + self.z1

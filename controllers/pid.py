@@ -8,7 +8,7 @@ import numpy as np
 
 from watflex_sim.params import CONTROL_PERIOD
 
-from .state_feedback import RateColumns, RateFilter
+from .state_feedback import RateFilter
 
 
 class PID:
@@ -62,14 +62,14 @@ class PID:
                 type(m).__call__ is not PID.__call__ or any(getattr(m, n) != getattr(first, n) for n in names)
                 or (m.alpha < 1.0) != (first.alpha < 1.0) or m._out is not None or m.integral != 0.0 for m in members):
             return None
-        rate = RateColumns.of([m.rate for m in members])
+        rate = RateFilter.columns([m.rate for m in members])
         return None if rate is None else PIDColumns(members, rate)
 
 
 class PIDColumns:
     """PID of B members at once, on arrays of shape (B,): the same arithmetic, member by member."""
 
-    def __init__(self, members: list[PID], rate: RateColumns):
+    def __init__(self, members: list[PID], rate: RateFilter):
         first = members[0]
         self.command, self.position, self.reference, self.deflection = (first.command, first.position,
                                                                          first.reference, first.deflection)

@@ -9,7 +9,7 @@ from scipy import signal
 
 from watflex_sim.params import CONTROL_PERIOD
 
-from .filters import Butterworth2, Butterworth2Columns
+from .filters import Butterworth2
 
 
 class RateFilter:
@@ -50,48 +50,30 @@ class RateFilter:
         if self.smooth:
             self.smooth.reset()
 
+    @staticmethod
+    def columns(members: list["RateFilter"]) -> "RateFilter | None":
+        """The members as one filter on arrays of shape (B,) (their periods and coefficients as arrays, the same
+        arithmetic), or None unless they share a form (method, taps, filter order) and have not run yet."""
+        first = members[0]
+        if not all(m.plain == first.plain and m.taps == first.taps and (m.smooth is None) == (first.smooth is None)
+                   and (m.plain or (len(m.b), len(m.a)) == (len(first.b), len(first.a))) and m.x is None for m in members):
+            return None
+        out = RateFilter.__new__(RateFilter)
+        out.plain, out.taps = first.plain, first.taps
+        out.period = np.array([m.period for m in members])
+        out.smooth = Butterworth2.columns([m.smooth for m in members]) if first.smooth else None
+        if not first.plain:
+            out.b = [np.array([m.b[i] for m in members]) for i in range(len(first.b))]
+            out.a = [np.array([m.a[i] for m in members]) for i in range(len(first.a))]
+        out.reset()
+        return out
+
     def __call__(self, value: float) -> float:
         if self.plain:  # the last taps + 1 samples
             self.x = ([] if self.x is None else self.x)[-self.taps:] + [value]
             rate = (value - self.x[0]) / (self.taps * self.period) if len(self.x) > self.taps else 0.0
             return self.smooth(rate) if self.smooth else rate
         if self.x is None:  # at rest at the first value
-            self.x = [value] * len(self.b)
-        self.x = [value] + self.x[:-1]
-        y = sum(b * x for b, x in zip(self.b, self.x)) - sum(a * y for a, y in zip(self.a, self.y))
-        if self.y:
-            self.y = [y] + self.y[:-1]
-        return y
-
-
-class RateColumns:
-    """RateFilter of B members at once, on arrays of shape (B,): the same arithmetic, member by member
-    (lockstep's columns). `of` gives None unless the members share a form (method, taps, filter order)."""
-
-    @staticmethod
-    def of(members: list[RateFilter]) -> "RateColumns | None":
-        first = members[0]
-        same = all(m.plain == first.plain and m.taps == first.taps and (m.smooth is None) == (first.smooth is None)
-                   and (m.plain or (len(m.b), len(m.a)) == (len(first.b), len(first.a))) and m.x is None for m in members)
-        return RateColumns(members) if same else None
-
-    def __init__(self, members: list[RateFilter]):
-        first = members[0]
-        self.plain, self.taps = first.plain, first.taps
-        self.span = np.array([m.taps * m.period for m in members])  # s: the time the difference spans
-        self.smooth = Butterworth2Columns([m.smooth for m in members]) if first.smooth else None
-        if not self.plain:
-            self.b = [np.array([m.b[i] for m in members]) for i in range(len(first.b))]
-            self.a = [np.array([m.a[i] for m in members]) for i in range(len(first.a))]
-            self.y = [np.zeros(len(members)) for _ in self.a]
-        self.x: list[np.ndarray] | None = None
-
-    def __call__(self, value: np.ndarray) -> np.ndarray:
-        if self.plain:
-            self.x = ([] if self.x is None else self.x)[-self.taps:] + [value]
-            rate = (value - self.x[0]) / self.span if len(self.x) > self.taps else np.zeros_like(value)
-            return self.smooth(rate) if self.smooth else rate
-        if self.x is None:
             self.x = [value] * len(self.b)
         self.x = [value] + self.x[:-1]
         y = sum(b * x for b, x in zip(self.b, self.x)) - sum(a * y for a, y in zip(self.a, self.y))
@@ -163,14 +145,14 @@ class StateFeedback:
                 or m.references != first.references or (m.alpha < 1.0) != (first.alpha < 1.0) or m._out is not None
                 for m in members):
             return None
-        rates = {s: RateColumns.of([m.rates[s] for m in members]) for s in first.rates}
+        rates = {s: RateFilter.columns([m.rates[s] for m in members]) for s in first.rates}
         return None if any(r is None for r in rates.values()) else StateFeedbackColumns(members, rates)
 
 
 class StateFeedbackColumns:
     """StateFeedback of B members at once, on arrays of shape (B,): the same arithmetic, member by member."""
 
-    def __init__(self, members: list[StateFeedback], rates: dict[str, RateColumns]):
+    def __init__(self, members: list[StateFeedback], rates: dict[str, RateFilter]):
         first = members[0]
         self.commands, self.states, self.references, self.rates = first.commands, first.states, first.references, rates
         self.gains = [[np.array([m.gains[r][c] for m in members]) for c in range(len(first.states))]

@@ -167,7 +167,7 @@ class GenericColumns:
             coefficients = None if alpha is None else tuple([_per_member(rigs, lambda r, a=a, k=k: r._measured[m][7][a][k])
                                                              for k in range(len(alpha[a]))] for a in (0, 1))
             self.measured.append((channel, kind, index, numbers, coefficients))
-        self.filtered: dict[str, tuple[list, list]] = {}
+        self._filtered: dict[str, tuple[list, list]] = {}  # channel -> (inputs, outputs) of its filter
         self.commands = [(channel, actuator, *(_per_member(rigs, lambda r, c=channel, k=k: r._commands[c][k]) for k in (1, 2, 3)))
                          for channel, (actuator, *_rest) in first._commands.items()]  # gain, limit, step
 
@@ -203,16 +203,7 @@ class GenericColumns:
             obs[channel] = np.where(step != 0, step * np.round(value / np.where(step != 0, step, 1.0)), value)
         return obs
 
-    def _filter(self, channel: str, coefficients, value: np.ndarray) -> np.ndarray:
-        b, a = coefficients
-        x, y = self.filtered.setdefault(channel, ([value] * len(b), [value] * (len(a) - 1)))
-        x.insert(0, value)
-        x.pop()
-        out = sum(bi * xi for bi, xi in zip(b, x)) - sum(ai * yi for ai, yi in zip(a[1:], y))
-        if y:
-            y.insert(0, out)
-            y.pop()
-        return out
+    _filter = GenericRig._filter  # the same arithmetic on arrays
 
     def actuate(self, command: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out = {}
