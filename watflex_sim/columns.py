@@ -4,15 +4,16 @@ Each simulation's own control half (engine.ControlLoop.control) costs 10-14 us o
 here the same arithmetic runs once per tick on arrays of shape (B,) and gives, member by member, the
 same numbers (tests/test_lockstep.py compares every channel with tolerance 0): the rig's sensors and
 converters (LaserColumns, WatflexColumns: encoders, strain bridges, camera, tip sensor, current
-monitor, converters and saturation), the controller's column form (`columns` of PID, StateFeedback
-and OpenLoop, in controllers/), the references and the noise tabulated at set-up
+monitor, converters and saturation; GenericColumns: a rig described as data), the controller's column
+form (`columns` of PID, StateFeedback and OpenLoop, in controllers/), the references and the noise tabulated at set-up
 (rigs.NoiseStream.take: the draws the single run makes, in its order), the recording written as
 columns. Where the single run calls math.atan2 it is called here too (numpy's arctan2 differs in the
 last bit for ~0.6 % of arguments).
 
-`ColumnControl.of` gives None where a member needs what has no column form - a generic rig, another
-controller, an effect on the control half (sensor or actuator gain, offset, limit; delays), control
-jitter - and lockstep then runs each member's own control half.
+`ColumnControl.of` gives None where a member needs what has no column form - another controller
+(observer, passivity, fuzzy PD, PI velocity, friction compensation), an effect on the control half
+(sensor or actuator gain, offset, limit; delays), control jitter - and lockstep then runs each
+member's own control half.
 """
 from __future__ import annotations
 
