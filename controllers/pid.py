@@ -58,8 +58,7 @@ class PID:
         """The members' law on arrays (lockstep's columns), or None unless they share its form."""
         first = members[0]
         names = ("command", "position", "reference", "deflection")
-        if type(first).__call__ is not PID.__call__ or any(
-                type(m).__call__ is not PID.__call__ or any(getattr(m, n) != getattr(first, n) for n in names)
+        if any(type(m).__call__ is not PID.__call__ or any(getattr(m, n) != getattr(first, n) for n in names)
                 or (m.alpha < 1.0) != (first.alpha < 1.0) or m._out is not None or m.integral != 0.0 for m in members):
             return None
         rate = RateFilter.columns([m.rate for m in members])

@@ -596,3 +596,5 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     assert canonical({"effect": "position_dependent_friction", "amplitude": -0.08, "phase": -1.5})["phase"] == pytest.approx(-1.5 + math.pi)
     positive = dict(found, amplitude=0.3)
     assert canonical(positive) is positive
+    quarter = dict(found, phase=-math.pi / 2)  # shifted to +pi/2 = -phase: moved by pi, not mirrored
+    assert _canonical(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))

@@ -139,16 +139,22 @@ def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
     assert _pays(loops("laser_arm_step", 30, [f"effects=[{coulomb}, {offset}]"]))
 
 
-def test_the_control_half_on_arrays_matches_single_runs(monkeypatch):
+@pytest.fixture
+def built(monkeypatch):
+    """Every ColumnControl lockstep builds (None where a group has no column form): proof a case ran on arrays."""
+    from watflex_sim import lockstep
+
+    made = []
+    original = lockstep.ColumnControl.of
+    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: made.append(original(*a)) or made[-1])
+    return made
+
+
+def test_the_control_half_on_arrays_matches_single_runs(built):
     """columns.py: the rigs' sensors and converters and the controllers' column forms (open loop, pd_joint's
     Butterworth-filtered difference, PID with integral, limit and command filter, state feedback through a
     discretised rate filter, pd_tip with a difference) give each member the single run's numbers, bit for bit;
     the spy makes sure every case really ran on arrays."""
-    from watflex_sim import lockstep
-
-    built = []
-    original = lockstep.ColumnControl.of
-    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: built.append(original(*a)) or built[-1])
     pid = ("controller={type='pid', command='elbow_torque_cmd', position='elbow_angle', reference='elbow_reference', "
            "kp=60.0, ki=40.0, kd=12.0, rate_hz=30.0, limit=1.5, command_filter_hz=80.0}")
     feedback = ("controller={type='state_feedback', commands=['elbow_torque_cmd'], states=['elbow_angle', "
@@ -162,15 +168,11 @@ def test_the_control_half_on_arrays_matches_single_runs(monkeypatch):
         assert built and all(c is not None for c in built), name
 
 
-def test_a_diagnosis_resimulation_batch_runs_on_arrays_and_matches_single_runs(monkeypatch):
+def test_a_diagnosis_resimulation_batch_runs_on_arrays_and_matches_single_runs(built):
     """resim.resimulate_many, as the diagnosis calls it: one laser-arm recording re-simulated with six refit
     models (ratios of the beam's stiffness) in lockstep, on arrays, equals each re-simulated alone."""
-    from watflex_sim import lockstep
     from watflex_sim.resim import resimulate, resimulate_many
 
-    built = []
-    original = lockstep.ColumnControl.of
-    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: built.append(original(*a)) or built[-1])
     rec = simulate(load_scenario("laser_arm_step", ["duration_s=0.5", "seed=4"])).recording
     ratios = [0.97, 0.99, 1.0, 1.01, 1.02, 1.04]
     together = resimulate_many([(rec, [], {"beam_EI": r}) for r in ratios], nthread=1)
@@ -185,21 +187,17 @@ def test_a_diagnosis_resimulation_batch_runs_on_arrays_and_matches_single_runs(m
     ("quanser_2dsfl", "quanser_2dsfl/data_fsf_th11.mat", "link2_stiffness", [0.92, 0.96, 1.0, 1.02, 1.05, 1.08]),
     ("emps", "emps/DATA_EMPS.mat", "mass", [0.8, 0.9, 1.0, 1.1, 1.2, 1.25]),
 ])
-def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(monkeypatch, rig, path, name, ratios, noise_seed):
+def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(built, rig, path, name, ratios, noise_seed):
     """columns.GenericColumns: a rig described as data (rigs/quanser_2dsfl.toml: link strains as hinge sums,
     state feedback through an Euler rate filter, current commands; rigs/emps.toml: cascade P with the 2-tap
     difference, a converter step) re-simulated in lockstep on arrays equals each re-simulated alone (2 s), with the
     rig's measurement noise off and on (the draws taken ahead in the single run's order)."""
     from pathlib import Path
 
-    from watflex_sim import lockstep
     from watflex_sim.recording import read_recording
     from watflex_sim.resim import resimulate, resimulate_many
     from watflex_sim.rigdesc import load_rig
 
-    built = []
-    original = lockstep.ColumnControl.of
-    monkeypatch.setattr(lockstep.ColumnControl, "of", lambda *a: built.append(original(*a)) or built[-1])
     description = load_rig(rig)
     rec = read_recording(Path(__file__).parent / "data" / path, sidecar=description.sidecar)
     together = resimulate_many([(rec, [], {name: r}, 2.0, noise_seed) for r in ratios], nthread=1, rig=description)

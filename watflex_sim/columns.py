@@ -30,6 +30,11 @@ def _per_member(rigs: list, value) -> np.ndarray:
     return np.array([value(r) for r in rigs], dtype=float)
 
 
+def _quantise(value: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """rigs.quantise on arrays (numpy's round, like Python's, rounds half to even)."""
+    return step * np.round(value / step)
+
+
 class LaserColumns:
     """LaserArmRig's observe / actuate / monitor for B members (rigs.md section 1)."""
 
@@ -52,7 +57,7 @@ class LaserColumns:
         arc = self.length * np.array([math.atan2(y, x) for y, x in zip(ys, xs)])
         error = self.length * refs["reference"] - arc  # m
         tip = self.sensor_gain * error + self.tip_noise * self.gauss[k, :, 0]
-        return {"reference": refs["reference"], "hub_angle": self.encoder_step * np.round(theta / self.encoder_step),
+        return {"reference": refs["reference"], "hub_angle": _quantise(theta, self.encoder_step),
                 "tip_sensor": np.clip(tip, -self.sensor_limit, self.sensor_limit)}
 
     def actuate(self, command: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -109,13 +114,11 @@ class WatflexColumns:
         obs = {}
         for j, q in self.joint_q.items():
             obs[f"{j}_reference"] = refs.get(f"{j}_reference", self.locked[j])
-        for j, q in self.joint_q.items():
-            angle = self.locked[j] if q is None else qpos[:, q]
-            obs[f"{j}_angle"] = self.encoder_step * np.round(angle / self.encoder_step)
+            obs[f"{j}_angle"] = _quantise(self.locked[j] if q is None else qpos[:, q], self.encoder_step)
         for g, (channel, qa, qb) in enumerate(self.gauges):
             va, vb = self.weights[g]
             volts = va * qpos[:, qa] + vb * qpos[:, qb] + self.strain_noise * self.gauss[k, :, g]
-            obs[channel] = self.adc_step * np.round(np.clip(volts, -self.adc_limit, self.adc_limit) / self.adc_step)
+            obs[channel] = _quantise(np.clip(volts, -self.adc_limit, self.adc_limit), self.adc_step)
         if k % self.camera_every == 0 and self.tip is not None:
             draw = self.uniform[k // self.camera_every]
             obs["tip_x"] = self.tip[:, 0] + self.camera_noise * (2 * draw[:, 0] - 1)
@@ -200,8 +203,7 @@ class GenericColumns:
             value = numbers["scale"] * x + numbers["offset"] + numbers["noise"] * self.gauss[k, m]
             if coefficients is not None:
                 value = self._filter(channel, coefficients, value)
-            step = numbers["step"]
-            obs[channel] = np.where(step != 0, step * np.round(value / np.where(step != 0, step, 1.0)), value)
+            obs[channel] = _quantise(value, numbers["step"]) if numbers["step"][0] else value  # fits: all or none
         return obs
 
     _filter = GenericRig._filter  # the same arithmetic on arrays
@@ -210,7 +212,8 @@ class GenericColumns:
         out = {}
         for channel, actuator, gain, limit, step in self.commands:
             u = np.clip(command.get(channel, 0.0), -limit, limit)
-            u = np.where(step != 0, step * np.round(u / np.where(step != 0, step, 1.0)), u)
+            if step[0]:  # a converter on every member or none (fits)
+                u = _quantise(u, step)
             self.ctrl[:, actuator] = gain * u
             out[channel] = u
         return out

@@ -206,13 +206,19 @@ def position_dependent_friction(patch, where, amplitude, period=2 * math.pi, pha
         ripple_amplitude=amplitude, ripple_period=period, ripple_phase=phase, spring=spring)
 
 
-def canonical(effect: dict) -> dict:
-    """The same physics in the one form reported where a catalogue parameterisation has two: a position-dependent
-    friction's a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), the phase kept within (-pi, pi]."""
+def canonical_moves(effect: dict) -> dict[str, tuple[float, float]]:
+    """Per parameter, (sign, shift) taking `effect` to the one form reported where a catalogue parameterisation has
+    two (value -> sign * value + shift; empty where it is in that form): a position-dependent friction's
+    a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), the phase kept within (-pi, pi]."""
     if effect.get("effect") != "position_dependent_friction" or effect.get("amplitude", 0.0) >= 0:
-        return effect
-    phase = effect.get("phase", 0.0)
-    return {**effect, "amplitude": -effect["amplitude"], "phase": phase + (math.pi if phase <= 0 else -math.pi)}
+        return {}
+    return {"amplitude": (-1.0, 0.0), "phase": (1.0, math.pi if effect.get("phase", 0.0) <= 0 else -math.pi)}
+
+
+def canonical(effect: dict) -> dict:
+    """`effect` in its one reported form (canonical_moves): the same physics."""
+    moves = canonical_moves(effect)
+    return {**effect, **{n: sign * effect.get(n, 0.0) + shift for n, (sign, shift) in moves.items()}} if moves else effect
 
 
 EXTRA_HINGE_ARMATURE = 5e-3  # kg m^2: the clamp between the two hinges in series [ours]; keeps

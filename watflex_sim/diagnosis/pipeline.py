@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from ..effects import CATALOGUE, canonical
+from ..effects import CATALOGUE, canonical, canonical_moves
 from ..engine import SimulationError
 from ..model import ConfigError
 from ..recording import Recording
@@ -363,21 +363,17 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
 
 
 def _canonical(model: Model, ranges: dict[int, dict]) -> tuple[Model, dict[int, dict]]:
-    """The model's effects in their canonical form (effects.canonical: the same physics), intervals moved with
-    them: a parameter whose sign flipped gets (-high, -low), one that was shifted is shifted by as much."""
-    effects, moved = [], {}
+    """The model's effects in their canonical form (effects.canonical: the same physics), each interval moved
+    by the same sign and shift as its parameter (effects.canonical_moves)."""
+    moved = {}
     for i, effect in enumerate(model.effects):
-        new = canonical(effect)
-        effects.append(new)
+        moves = canonical_moves(effect)
         moved[i] = {}
         for name, (lo, hi) in ranges.get(i, {}).items():
-            old, now = effect.get(name), new.get(name)
-            if old is not None and now is not None and now == -old and now != old:
-                lo, hi = -hi, -lo
-            elif old is not None and now is not None:
-                lo, hi = lo + (now - old), hi + (now - old)
-            moved[i][name] = (lo, hi)
-    return Model(effects, dict(model.parameters)), moved
+            sign, shift = moves.get(name, (1.0, 0.0))
+            a, b = sign * lo + shift, sign * hi + shift
+            moved[i][name] = (min(a, b), max(a, b))
+    return Model([canonical(e) for e in model.effects], dict(model.parameters)), moved
 
 
 def _noise_table(data: Data) -> list[dict]:
