@@ -373,8 +373,9 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     1.02, tolerance 2 %, rigs.md section 4) turn the same knob, so the data fix only their product; with one
     column for both, the effect's 95 % interval is its ratio x exp(+-1.96 sd / e), sd = 0.02 / sqrt 3 (the
     tolerance prior, uniform), however precise the data. Finite differences of unequal steps had made the
-    pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %)."""
-    from watflex_sim.diagnosis.pipeline import tie_knob_columns, tolerance_sd
+    pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %).
+    nominal_split() joins it with the same interval moved to the datasheet's split (gain 1.00)."""
+    from watflex_sim.diagnosis.uncertainty import tie_knob_columns, tolerance_sd
     from watflex_sim.diagnosis.screening import effect_slots_of
     from watflex_sim.diagnosis.fitting import rig_slots
 
@@ -395,6 +396,11 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     assert low == pytest.approx(expected[0], rel=2e-3) and high == pytest.approx(expected[1], rel=2e-3)
     narrow = intervals(slots, model, J, r, prior)[i]
     assert narrow[1] - narrow[0] < 0.01 * (high - low)  # untied, the precise data "separate" them
+    # nominal_split(): the fit's split (gain 1.02) is arbitrary, so the interval also spans the one about the
+    # datasheet's gain (1.00): the product 1.326 over 1.00, with the same relative width
+    from watflex_sim.diagnosis.uncertainty import nominal_split
+    assert nominal_split(data, model, slots[i], low, high) == pytest.approx((low, high * 1.02))
+    assert nominal_split(data, Model(model.effects, {"tip_sensor_gain": 0.98}), slots[i], low, high) == pytest.approx((low * 0.98, high))
 
 
 def test_a_later_finding_must_remove_the_excess_that_asked_for_it():
@@ -536,7 +542,7 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     finer land near the recorder's value (it *is* that discretisation; measured 0.4004 for a bias of 2.5 g:
     within a quarter of the bias, where Levenberg-Marquardt stops gaining 0.1 % a step), and the interval
     reaches past the truth."""
-    from watflex_sim.diagnosis import pipeline
+    from watflex_sim.diagnosis import uncertainty
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
     from watflex_sim.diagnosis.fitting import jacobian, levenberg, value_of
     from watflex_sim.diagnosis.runner import Runner, evaluator
@@ -555,22 +561,53 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
         start = Model([{"effect": "payload", "where": "tip", "mass": 0.3}])
         slots = effect_slots_of(data, start)
         per = unit_change(data, "all", sims=runner.simulate(start))
-        evaluate = pipeline.in_units(evaluator(runner, "all"), per)
+        evaluate = uncertainty.in_units(evaluator(runner, "all"), per)
         ours = levenberg(evaluate, start, slots, [0.3], iters=10)[0]
         sims = runner.simulate(ours)
         per = unit_change(data, "all", sims=sims)
-        evaluate = pipeline.in_units(evaluator(runner, "all"), per)
+        evaluate = uncertainty.in_units(evaluator(runner, "all"), per)
         u = np.array([s.to_internal(value_of(ours, s)) for s in slots])
         J = jacobian(evaluate, ours, slots, u, evaluate([ours])[0])
-        fine = pipeline.finer_refit(data, runner, ours, slots, J, per)
-        widened = pipeline.final_intervals(data, runner, ours, sims)[0]["mass"]
-        monkeypatch.setattr(pipeline, "finer_refit", lambda *a: None)
-        alone = pipeline.final_intervals(data, runner, ours, sims)[0]["mass"]
+        fine = uncertainty.finer_refit(data, runner, ours, slots, J, per)
+        widened = uncertainty.final_intervals(data, runner, ours, sims)[0]["mass"]
+        monkeypatch.setattr(uncertainty, "finer_refit", lambda *a: None)
+        alone = uncertainty.final_intervals(data, runner, ours, sims)[0]["mass"]
     bias = value_of(ours, slots[0]) - truth
     assert abs(bias) > 2e-3  # kg: what our discretisation costs the estimate
     assert abs(value_of(fine, slots[0]) - truth) < 0.25 * abs(bias)
     assert not alone[0] <= truth <= alone[1]
     assert widened[0] <= truth <= widened[1]
+
+
+def _slice_case(cost):
+    """slice_reach() on one effect parameter x (bounds 0-10) whose cost is `cost(x)` (0.5 |r|^2, r of
+    1,000 white elements so that s^2 is well defined), estimate 5.0 with an interval of [4.9, 5.1]."""
+    from watflex_sim.diagnosis.fitting import Slot
+    from watflex_sim.diagnosis.uncertainty import slice_reach
+
+    noise = np.random.default_rng(0).standard_normal(1000)
+    noise /= np.sqrt(noise @ noise)
+
+    def residual(x):
+        return noise * np.sqrt(2 * cost(x))
+    slots = [Slot(("effect", 0, "x"), 0.0, 10.0)]
+    model = Model([{"effect": "test", "where": "here", "x": 5.0}])
+    evaluate = lambda models: [residual(m.effects[0]["x"]) for m in models]  # noqa: E731
+    return slice_reach(evaluate, model, slots, 0, residual(5.0), 4.9, 5.1)
+
+
+def test_a_slice_leaves_a_smooth_minimum_alone_and_reaches_past_a_rough_one():
+    """slice_reach(): on a parabola with its minimum at the estimate the slice adds nothing (its threshold,
+    1.96^2/2 s^2 = 3.8 with s^2 ~ 2 x 1000 / 999, is below the parabola's 1,000 (x - 5)^2 = 10 at the first
+    probes, +-0.1); with jumps of +-300 between probes (stick-slip: seed 47's structural damping jumped +-400
+    between probes 0.01 apart) the probes at 4.6 and 5.4 beat the estimate by 140 and the interval reaches
+    them, but not 4.2 and 5.8, 940 above them (the jumps' RMS about a parabola is ~170)."""
+    smooth = lambda x: 1000 * (x - 5) ** 2 + 1000  # noqa: E731
+    assert _slice_case(smooth) == pytest.approx((4.9, 5.1))
+    jumps = {4.2: 300, 4.6: -300, 4.8: -50, 5.2: 300, 5.4: -300, 5.8: 300}
+    rough = lambda x: smooth(x) + next((v for k, v in jumps.items() if abs(k - x) < 1e-6), 0.0)  # noqa: E731
+    low, high = _slice_case(rough)
+    assert low == pytest.approx(4.6) and high == pytest.approx(5.4)
 
 
 def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():

@@ -244,6 +244,12 @@ def serial_inflation(r: np.ndarray) -> float:
     return (1 + phi) / (1 - phi)
 
 
+def residual_variance(r: np.ndarray, p: int) -> float:
+    """Variance per degree of freedom of residual `r` after fitting `p` parameters, times the serial-correlation
+    inflation: the s^2 that turns a cost change into a chi-square."""
+    return float(r @ r) / (r.size - p) * serial_inflation(r)
+
+
 def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray,
               prior_sd: list[float] | None = None, replicates: list[np.ndarray] | None = None) -> dict[int, tuple[float, float]]:
     """95 % intervals (physical units, within the slots' bounds) of the slots, by slot index:
@@ -268,7 +274,7 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray,
     n, p = r.size, len(free)
     if p == 0 or n <= p:
         return {}
-    s2 = float(r @ r) / (n - p) * serial_inflation(r)
+    s2 = residual_variance(r, p)
     prior = np.array([0.0 if not math.isfinite(sd) else sd**-2 for sd in (prior_sd or [math.inf] * p)])
     cov = np.linalg.pinv(J.T @ J / s2 + np.diag(prior)) if s2 > 0 else np.zeros((p, p))
     k = huber_threshold(r)

@@ -17,35 +17,28 @@ import time
 
 import numpy as np
 
-from ..effects import CATALOGUE, canonical, canonical_moves
-from ..engine import SimulationError
+from ..effects import canonical, canonical_moves
 from ..model import ConfigError
 from ..recording import Recording
 from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
 from .explain import finding, indistinct, units_at
-from .fitting import Slot, compass, intervals, jacobian, levenberg, rig_slots, unpack, value_of
+from .fitting import Slot, compass, jacobian, levenberg, rig_slots, unpack, value_of
 from .locate import locate
 from .runner import Runner, evaluator
 from .screening import (FIT_ITERATIONS, MIN_GAIN, RESCREEN, SCREEN_TOP, candidates, effect_slots_of, excited, fit_candidate,
                         make_candidate, rescreen, screen, scored, shortlist, signatures)
+from .uncertainty import FINER, KNOB_OF, NOISE_SEED, final_intervals, in_units, knob_partner
 
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
 MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
 EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
-SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
 AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
 POLISH_ITERATIONS = 6
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
-FINER = 2  # the discretisation error is judged against this many times the segments and a step this much finer
-NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
-FINER_ITERATIONS = 4  # Levenberg-Marquardt steps of the refit on the finer model (finer_refit; 1 simulation each)
-DISCRETISATION_REACH = 2.0  # x how far the finer refit moves an estimate: the interval's reach towards a converged
-# model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
-REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
 REFIT_ITERATIONS = 8
 COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
 # per parameter each); it stops once no step changes the cost by CHI2_RESOLUTION (6 sweeps halved the steps to
@@ -54,8 +47,6 @@ COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise get
 # off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
 # refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
 CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
-KNOB_OF = {"sensor_gain": "sensor_gain", "actuator_gain": "actuator_gain", "link_stiffness_change": "chain_stiffness",
-           "structural_damping": "chain_damping"}  # effects that turn a knob the rig may refit: within tolerance, not physics
 
 
 class Stages:
@@ -415,13 +406,6 @@ def _alternative(data: Data, result: dict, chosen: dict, before: int) -> dict:
             "model": {"effects": result["model"].effects, "parameters": result["model"].parameters}}
 
 
-def knob_partner(data: Data, effect: dict) -> str | None:
-    """The rig parameter that turns the same knob as `effect` (a link's stiffness change and that link's EI:
-    the residual depends on their product only), or None."""
-    knob = KNOB_OF.get(effect["effect"])
-    return next((n for n, p in data.rig.parameters.items() if (p["knob"], p["target"]) == (knob, effect["where"])), None)
-
-
 def beyond_tolerance(data: Data, model: Model) -> list:
     """Candidates for a rig parameter at (AT_BOUND of) its tolerance bound whose knob a catalogue effect turns
     (a link's EI: link_stiffness_change at that link; a sensor or actuator gain): the datasheet may be wrong
@@ -492,112 +476,6 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
                             [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
     new = runner.simulate(refit)
     return (refit, new) if new is not None else (model, sims)
-
-
-def in_units(evaluate, per: np.ndarray):
-    """An evaluator of residuals in spread units turned to the units `per` (`unit_change`, computed in
-    this process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
-    copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
-    return lambda models: [None if r is None else r / per for r in evaluate(models)]
-
-
-def tolerance_sd(slot: Slot) -> float:
-    """Prior sd (internal units) of a rig parameter's slot: a uniform spread over its +-tolerance has
-    sd tolerance / sqrt 3; inf (no prior) for an effect's parameter."""
-    return slot.span() / 2 / math.sqrt(3) if slot.where[0] == "param" else math.inf
-
-
-def tie_knob_columns(data: Data, model: Model, slots: list[Slot], J: np.ndarray) -> np.ndarray:
-    """J with the column of each rig parameter that turns the same knob as an effect's ratio (knob_partner)
-    derived from the effect's column: the residual depends on ratio x e only, so d r / d e =
-    d r / d(ratio) x ratio / e (d r / d log ratio / e for a log-scaled ratio) - one column, not two
-    finite differences of unequal steps that would make the pair look separable."""
-    J = J.copy()
-    for i, slot in enumerate(slots):
-        partner = knob_partner(data, model.effects[slot.where[1]]) if slot.where[0] == "effect" else None
-        j = next((j for j, s in enumerate(slots) if partner and s.where == ("param", partner)), None)
-        if j is not None and slot.name == "ratio":
-            ratio, e = value_of(model, slot), value_of(model, slots[j])
-            J[:, j] = J[:, i] * (1.0 if slot.log else ratio) / e
-    return J
-
-
-def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recording], trained: Model | None = None) -> dict[int, dict[str, tuple[float, float]]]:
-    """95 % intervals of every effect parameter of the final model: effect index -> parameter -> (low, high).
-    A quantised parameter (a delay) is good to half its step. The Jacobian's interval is over every
-    effect parameter and rig parameter together, those at a bound too (a friction side near 0 that
-    trades off with a viscous term widens it), the rig's with their tolerance as a prior (the sd of a uniform
-    spread over +-tolerance, tolerance / sqrt 3). An effect that turns a rig parameter's knob (a link's stiffness
-    change and its EI) has one Jacobian column for both, so their product alone is fixed by the data: finite
-    differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a +-5 % tolerance) made the two look
-    separable (seed 6: a link stiffness 4.8 % off with an interval of +-0.05 %, the EI at its bound).
-    The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
-    the final model's simulations, where larger), and REPLICATES simulations of the
-    final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
-    which way (`fitting.intervals`): in closed loop, noise fed back moves the rig, which no white-noise
-    interval describes. It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the
-    training half alone (`trained`): on a rough (stick-slip) cost the fit's own scatter dominates; for
-    unbiased estimates that distance is |N(0, sd)| of the all-data estimate, and SPLIT_WIDTH = 4 covers
-    84 % from that one sample (2/pi atan 4)."""
-    out: dict[int, dict] = {}
-    for i, effect in enumerate(model.effects):
-        for p in CATALOGUE[effect["effect"]][1]:
-            if p.quantum and p.name in effect:
-                out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
-    if not model.effects:
-        return out
-    slots = effect_slots_of(data, model) + rig_slots(data)
-    per = unit_change(data, "all", sims=sims)  # the units final_refit fits in
-    evaluate = in_units(evaluator(runner, "all"), per)
-    r = evaluate([model])[0]
-    if r is None:
-        return out
-    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
-    J = tie_knob_columns(data, model, slots, jacobian(evaluate, model, slots, u, r))
-    prior = [tolerance_sd(s) for s in slots]
-    noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
-    replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
-    fine = finer_refit(data, runner, model, slots, J, per)
-    for k, (low, high) in intervals(slots, model, J, r, prior, replicates).items():
-        slot = slots[k]
-        if slot.where[0] == "effect":
-            value = slot.to_internal(value_of(model, slot))
-            if trained is not None and len(trained.effects) == len(model.effects):
-                reach = SPLIT_WIDTH * abs(value - slot.to_internal(value_of(trained, slot)))
-                low = min(low, max(slot.to_value(value - reach), slot.low))
-                high = max(high, min(slot.to_value(value + reach), slot.high))
-            if fine is not None:
-                far = slot.to_value(value + DISCRETISATION_REACH * (slot.to_internal(value_of(fine, slot)) - value))
-                low, high = min(low, max(far, slot.low)), max(high, min(far, slot.high))
-            out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
-    return out
-
-
-def finer_refit(data: Data, runner: Runner, model: Model, slots: list[Slot], J: np.ndarray, per: np.ndarray) -> Model | None:
-    """`model`'s parameters refit on all the data with the model simulated FINER x finer (segments, step),
-    from `model` with its Jacobian J (final_intervals' units: per), FINER_ITERATIONS steps; None when the
-    rig has no discretisation to refine or the finer model diverges. How far the estimates move is what our
-    own discretisation costs them: data from a finer simulator or a continuum (a real rig) pulls them that
-    way, which no amount of data averages away. A linearised pull, J's least-squares answer to the finer
-    model's residual change, predicted a quarter of it (seed 41, a Watflex payload 0.5107 kg for 0.5006: pull
-    0.0023 kg; this refit moves it to 0.5067) and the wrong sign for an elbow Coulomb friction, whose valley
-    against the rig's friction scale this refit does not leave either (0.505 -> 0.508 N m for 0.537)."""
-    if not any(data.discretisation):
-        return None
-
-    def finer(models):
-        out = []
-        for m in models:
-            sims = runner.simulate(m, finer=FINER)
-            out.append(None if sims is None else residual_vector(data, sims, "all") / per)
-        return out
-    start = finer([model])[0]
-    if start is None:
-        return None
-    try:
-        return levenberg(finer, model, slots, [value_of(model, s) for s in slots], J, FINER_ITERATIONS, start)[0]
-    except SimulationError:
-        return None
 
 
 def at_bounds(data: Data, model: Model) -> list[dict]:

@@ -1,0 +1,199 @@
+"""Uncertainty: 95 % intervals of the final model's parameters, in physical units.
+
+Contract: `final_intervals(data, runner, model, sims)` returns effect index -> parameter -> (low, high),
+every interval within the parameter's bounds. It joins what each source of error would move an estimate
+by: the data's noise (the Jacobian, widened for serial correlation and for the rig's noise fed back in
+closed loop: `fitting.intervals`), the split of the data (the estimate from the training half alone), our
+own discretisation (`finer_refit`) and a cost that stick-slip makes rough (`slice_reach`: the estimate
+is known only up to where the cost's smooth trend rises above its roughness). Knob-tied pairs (an
+effect's ratio and the rig parameter turning the same knob) share one Jacobian column.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..effects import CATALOGUE
+from ..engine import SimulationError
+from ..recording import Recording
+from .data import Data, Model, residual_vector, unit_change
+from .fitting import Slot, at_internal, intervals, jacobian, levenberg, residual_variance, rig_slots, value_of
+from .runner import Runner, evaluator
+from .screening import effect_slots_of
+
+SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
+FINER = 2  # the discretisation error is judged against this many times the segments and a step this much finer
+NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
+FINER_ITERATIONS = 4  # Levenberg-Marquardt steps of the refit on the finer model (finer_refit; 1 simulation each)
+DISCRETISATION_REACH = 2.0  # x how far the finer refit moves an estimate: the interval's reach towards a converged
+# model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
+REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
+KNOB_OF = {"sensor_gain": "sensor_gain", "actuator_gain": "actuator_gain", "link_stiffness_change": "chain_stiffness",
+           "structural_damping": "chain_damping"}  # effects that turn a knob the rig may refit: within tolerance, not physics
+SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
+
+
+def knob_partner(data: Data, effect: dict) -> str | None:
+    """The rig parameter that turns the same knob as `effect` (a link's stiffness change and that link's EI:
+    the residual depends on their product only), or None."""
+    knob = KNOB_OF.get(effect["effect"])
+    return next((n for n, p in data.rig.parameters.items() if (p["knob"], p["target"]) == (knob, effect["where"])), None)
+
+
+def in_units(evaluate, per: np.ndarray):
+    """An evaluator of residuals in spread units turned to the units `per` (`unit_change`, computed in
+    this process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
+    copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
+    return lambda models: [None if r is None else r / per for r in evaluate(models)]
+
+
+def tolerance_sd(slot: Slot) -> float:
+    """Prior sd (internal units) of a rig parameter's slot: a uniform spread over its +-tolerance has
+    sd tolerance / sqrt 3; inf (no prior) for an effect's parameter."""
+    return slot.span() / 2 / math.sqrt(3) if slot.where[0] == "param" else math.inf
+
+
+def tie_knob_columns(data: Data, model: Model, slots: list[Slot], J: np.ndarray) -> np.ndarray:
+    """J with the column of each rig parameter that turns the same knob as an effect's ratio (knob_partner)
+    derived from the effect's column: the residual depends on ratio x e only, so d r / d e =
+    d r / d(ratio) x ratio / e (d r / d log ratio / e for a log-scaled ratio) - one column, not two
+    finite differences of unequal steps that would make the pair look separable."""
+    J = J.copy()
+    for i, slot in enumerate(slots):
+        partner = knob_partner(data, model.effects[slot.where[1]]) if slot.where[0] == "effect" else None
+        j = next((j for j, s in enumerate(slots) if partner and s.where == ("param", partner)), None)
+        if j is not None and slot.name == "ratio":
+            ratio, e = value_of(model, slot), value_of(model, slots[j])
+            J[:, j] = J[:, i] * (1.0 if slot.log else ratio) / e
+    return J
+
+
+def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recording], trained: Model | None = None) -> dict[int, dict[str, tuple[float, float]]]:
+    """95 % intervals of every effect parameter of the final model: effect index -> parameter -> (low, high).
+    A quantised parameter (a delay) is good to half its step. The Jacobian's interval is over every
+    effect parameter and rig parameter together, those at a bound too (a friction side near 0 that
+    trades off with a viscous term widens it), the rig's with their tolerance as a prior (the sd of a uniform
+    spread over +-tolerance, tolerance / sqrt 3). An effect that turns a rig parameter's knob (a link's stiffness
+    change and its EI) has one Jacobian column for both, so their product alone is fixed by the data: finite
+    differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a +-5 % tolerance) made the two look
+    separable (seed 6: a link stiffness 4.8 % off with an interval of +-0.05 %, the EI at its bound).
+    The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
+    the final model's simulations, where larger), and REPLICATES simulations of the
+    final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
+    which way (`fitting.intervals`): in closed loop, noise fed back moves the rig, which no white-noise
+    interval describes. It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the
+    training half alone (`trained`): on a rough (stick-slip) cost the fit's own scatter dominates; for
+    unbiased estimates that distance is |N(0, sd)| of the all-data estimate, and SPLIT_WIDTH = 4 covers
+    84 % from that one sample (2/pi atan 4)."""
+    out: dict[int, dict] = {}
+    for i, effect in enumerate(model.effects):
+        for p in CATALOGUE[effect["effect"]][1]:
+            if p.quantum and p.name in effect:
+                out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
+    if not model.effects:
+        return out
+    slots = effect_slots_of(data, model) + rig_slots(data)
+    per = unit_change(data, "all", sims=sims)  # the units final_refit fits in
+    evaluate = in_units(evaluator(runner, "all"), per)
+    r = evaluate([model])[0]
+    if r is None:
+        return out
+    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
+    J = tie_knob_columns(data, model, slots, jacobian(evaluate, model, slots, u, r))
+    prior = [tolerance_sd(s) for s in slots]
+    noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
+    replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
+    fine = finer_refit(data, runner, model, slots, J, per)
+    for k, (low, high) in intervals(slots, model, J, r, prior, replicates).items():
+        slot = slots[k]
+        if slot.where[0] == "effect":
+            value = slot.to_internal(value_of(model, slot))
+            if trained is not None and len(trained.effects) == len(model.effects):
+                reach = SPLIT_WIDTH * abs(value - slot.to_internal(value_of(trained, slot)))
+                low = min(low, max(slot.to_value(value - reach), slot.low))
+                high = max(high, min(slot.to_value(value + reach), slot.high))
+            if fine is not None:
+                far = slot.to_value(value + DISCRETISATION_REACH * (slot.to_internal(value_of(fine, slot)) - value))
+                low, high = min(low, max(far, slot.low)), max(high, min(far, slot.high))
+            low, high = slice_reach(evaluate, model, slots, k, r, low, high)
+            low, high = nominal_split(data, model, slot, low, high)
+            out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
+    return out
+
+
+def nominal_split(data: Data, model: Model, slot: Slot, low: float, high: float) -> tuple[float, float]:
+    """Interval (low, high) of a knob-tied effect's ratio joined with the same interval moved to the rig
+    parameter's nominal value: the data fix the product ratio x e only (tie_knob_columns), so where the fit split
+    it is arbitrary within e's tolerance, and the interval about the fit's split is one of many; about e = 1
+    (the datasheet's value, the centre of its tolerance) is the other end of the range (seed 47: a link stiffness
+    x3.17 on a rig with link 2's EI at 0.957 was found at x2.979 with the EI refit at 1.030, interval [2.819,
+    3.147]; moved to EI 1, [2.904, 3.242]). Any other slot: unchanged."""
+    partner = knob_partner(data, model.effects[slot.where[1]]) if slot.name == "ratio" else None
+    if partner is None:
+        return low, high
+    e = model.parameters.get(partner, 1.0)
+    return max(min(low, low * e), slot.low), min(max(high, high * e), slot.high)
+
+
+def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray, low: float, high: float) -> tuple[float, float]:
+    """Interval (low, high) of slot i widened to every probe of the cost along that slot alone, SLICE_STEPS x
+    the interval's half-width on each side (others held), whose cost 0.5 |r|^2 is within a threshold of the
+    lowest seen: 1.96^2 / 2 x s^2 (`residual_variance`: what the data's noise resolves), or, where more, 1.96 x
+    the cost's roughness, the RMS departure of the inner probes from a parabola. On a smooth cost with the
+    estimate at its minimum this adds nothing (the slice is narrower than the Jacobian's interval, which
+    counts the trade-offs with the other parameters); where stick-slip makes the cost rough, a minimum is
+    known only to where the smooth trend rises above the jumps, and a probe that beats the estimate
+    shows the fit stopped short (seed 47, structural damping of link 2 at x14.516, interval [14.513, 14.522]:
+    the cost at 14.49 is 51 lower, with jumps of +-400 between probes 0.01 apart; the truth is 14.48).
+    `r`: the residual of `model` in `evaluate`'s units."""
+    slot = slots[i]
+    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
+    bottom, top = slot.to_internal(slot.low), slot.to_internal(slot.high)
+    a, b = slot.to_internal(low), slot.to_internal(high)
+    half = max(u[i] - a, b - u[i], 1e-4 * (top - bottom))
+    points = sorted({float(np.clip(u[i] + sign * k * half, bottom, top)) for sign in (-1, 1) for k in SLICE_STEPS} - {float(u[i])})
+    probes = []
+    for x in points:
+        v = u.copy()
+        v[i] = x
+        probes.append(at_internal(v, slots, model))
+    costs = np.array([math.inf if q is None else 0.5 * float(q @ q) for q in evaluate(probes)])
+    cost0 = 0.5 * float(r @ r)
+    inner = [k for k, x in enumerate(points) if abs(x - u[i]) <= SLICE_STEPS[-2] * half * (1 + 1e-9) and math.isfinite(costs[k])]
+    x = np.array([0.0] + [(points[k] - u[i]) / half for k in inner])
+    c = np.array([cost0] + [costs[k] for k in inner])
+    roughness = 0.0
+    if x.size > 3:
+        departure = c - np.polyval(np.polyfit(x, c, 2), x)
+        roughness = math.sqrt(float(departure @ departure) / (x.size - 3))
+    threshold = min(cost0, float(costs.min(initial=math.inf))) + max(1.96**2 / 2 * residual_variance(r, len(slots)), 1.96 * roughness)
+    kept = [x for x, c in zip(points, costs) if c <= threshold]
+    return slot.to_value(min([a] + kept)), slot.to_value(max([b] + kept))
+
+
+def finer_refit(data: Data, runner: Runner, model: Model, slots: list[Slot], J: np.ndarray, per: np.ndarray) -> Model | None:
+    """`model`'s parameters refit on all the data with the model simulated FINER x finer (segments, step),
+    from `model` with its Jacobian J (final_intervals' units: per), FINER_ITERATIONS steps; None when the
+    rig has no discretisation to refine or the finer model diverges. How far the estimates move is what our
+    own discretisation costs them: data from a finer simulator or a continuum (a real rig) pulls them that
+    way, which no amount of data averages away. A linearised pull, J's least-squares answer to the finer
+    model's residual change, predicted a quarter of it (seed 41, a Watflex payload 0.5107 kg for 0.5006: pull
+    0.0023 kg; this refit moves it to 0.5067) and the wrong sign for an elbow Coulomb friction, whose valley
+    against the rig's friction scale this refit does not leave either (0.505 -> 0.508 N m for 0.537)."""
+    if not any(data.discretisation):
+        return None
+
+    def finer(models):
+        out = []
+        for m in models:
+            sims = runner.simulate(m, finer=FINER)
+            out.append(None if sims is None else residual_vector(data, sims, "all") / per)
+        return out
+    start = finer([model])[0]
+    if start is None:
+        return None
+    try:
+        return levenberg(finer, model, slots, [value_of(model, s) for s in slots], J, FINER_ITERATIONS, start)[0]
+    except SimulationError:
+        return None
