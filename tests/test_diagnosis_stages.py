@@ -9,7 +9,8 @@ from watflex_sim.diagnosis import Model, Slot, intervals, prepare
 from watflex_sim.diagnosis.data import measured_noise, split_blocks
 from watflex_sim.diagnosis.explain import direction, indistinct, physical_place, units_at
 from watflex_sim.diagnosis.fitting import huber_threshold
-from watflex_sim.diagnosis.pipeline import explained_share, fold_within_tolerance
+from watflex_sim.diagnosis.pipeline import explained_share
+from watflex_sim.diagnosis.tolerance import fold_within_tolerance
 from watflex_sim.model import load_model
 
 
@@ -487,11 +488,11 @@ def test_the_polish_also_starts_from_the_rig_as_its_datasheet_says(monkeypatch):
     values, 0.84 x). Here every fit stalls where it starts (a rough cost), and training scores depend on the
     rig's ratio only, best at 1: the polish must come back with the start at `rig_start` ({}: the datasheet),
     keep the effect's value, and keep its own result when the restart fits worse."""
-    from watflex_sim.diagnosis import pipeline
+    from watflex_sim.diagnosis import refine
 
-    monkeypatch.setattr(pipeline, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
-    monkeypatch.setattr(pipeline, "evaluator", lambda runner: None)
-    monkeypatch.setattr(pipeline, "scored", lambda data, result, sims: {**result, "train": {"noise_ratio": sims}})
+    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
+    monkeypatch.setattr(refine, "evaluator", lambda runner: None)
+    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "train": {"noise_ratio": sims}})
 
     class Runner:
         def simulate(self, model):
@@ -500,12 +501,12 @@ def test_the_polish_also_starts_from_the_rig_as_its_datasheet_says(monkeypatch):
     free = [Slot(("effect", 0, "width"), 1e-5, 0.5, log=True), Slot(("param", "beam_EI"), 0.95, 1.05)]
     found = Model([{"effect": "backlash", "where": "hub", "width": 2.9e-4, "position": 0.9}], {"beam_EI": 1.009})
     result = {"model": found, "free": free, "train": {"noise_ratio": Runner().simulate(found)}}
-    polished = pipeline.polish(None, Runner(), result, rig_start={})
+    polished = refine.polish(None, Runner(), result, rig_start={})
     assert polished["model"].parameters == {"beam_EI": 1.0} and polished["train"]["noise_ratio"] == 1.0
     assert polished["model"].effects == found.effects
-    worse = pipeline.polish(None, Runner(), result, rig_start={"beam_EI": 1.04})
+    worse = refine.polish(None, Runner(), result, rig_start={"beam_EI": 1.04})
     assert worse["model"].parameters == {"beam_EI": 1.009}
-    assert pipeline.polish(None, Runner(), result)["model"] is found  # no rig start: the fit alone
+    assert refine.polish(None, Runner(), result)["model"] is found  # no rig start: the fit alone
 
 
 def test_a_rig_parameter_pinned_at_its_bound_asks_for_the_effect_that_turns_its_knob(laser_recordings):
@@ -513,7 +514,7 @@ def test_a_rig_parameter_pinned_at_its_bound_asks_for_the_effect_that_turns_its_
     beyond its tolerance: the candidate is link_stiffness_change at the beam, and it is not held to a later
     finding's excess rule (seed 43: a beam 36 % softer beside a 5 ms delay was missed at 1.17 x the noise). An
     inertia at its bound has no such effect; EI inside its tolerance, or the effect already found, asks nothing."""
-    from watflex_sim.diagnosis.pipeline import beyond_tolerance
+    from watflex_sim.diagnosis.tolerance import beyond_tolerance
 
     data = prepare(laser_recordings, ["pos", "neg"])
     pinned = beyond_tolerance(data, Model(parameters={"beam_EI": 0.95, "hub_inertia": 0.97}))

@@ -5,6 +5,9 @@ One module per stage, each with its contract in its docstring:
   runner      re-simulation jobs in worker processes
   fitting     Levenberg-Marquardt on bounded slots, 95 % intervals
   screening   candidate effects, their signatures, screening and candidate fits
+  refine      the chosen candidate's polish and the other forms of the same finding
+  tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
+  uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost)
   locate      where the residual stands out of the noise, in which regime
   explain     findings in the rig's physical terms
   experiment  the experiment that would separate explanations the data cannot

@@ -22,21 +22,21 @@ from ..model import ConfigError
 from ..recording import Recording
 from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
-from .explain import finding, indistinct, units_at
-from .fitting import Slot, compass, jacobian, levenberg, rig_slots, unpack, value_of
+from .explain import finding, indistinct
+from .fitting import compass, jacobian, levenberg, rig_slots, value_of
 from .locate import locate
+from .refine import POLISH_ITERATIONS, alternative_entry, offset_alternative, polish, single_from_pair
 from .runner import Runner, evaluator
-from .screening import (FIT_ITERATIONS, MIN_GAIN, RESCREEN, SCREEN_TOP, candidates, effect_slots_of, excited, fit_candidate,
+from .screening import (FIT_ITERATIONS, MIN_GAIN, RESCREEN, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
                         make_candidate, rescreen, screen, scored, shortlist, signatures)
-from .uncertainty import FINER, KNOB_OF, NOISE_SEED, final_intervals, in_units, knob_partner
+from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance, knob_partner
+from .uncertainty import FINER, NOISE_SEED, final_intervals, in_units
 
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
 MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
 EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
-AT_BOUND = 0.95  # a refit ratio beyond this share of its tolerance sits at its bound
-POLISH_ITERATIONS = 6
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
 REFIT_ITERATIONS = 8
@@ -263,7 +263,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
-        alternatives += [_alternative(data, r, best, n) for r in fitted if places(r) != places(best)
+        alternatives += [alternative_entry(data, r, best, n) for r in fitted if places(r) != places(best)
                          and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
@@ -390,59 +390,6 @@ def _verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, re
             f"{refit_held['noise_ratio']:.2f} x) and no further catalogue effect earns its place: see 'residual'")
 
 
-def _alternative(data: Data, result: dict, chosen: dict, before: int) -> dict:
-    """A fitted candidate that explains validation about as well as the chosen one (its effects are
-    those after the first `before` of its model)."""
-    new = result["model"].effects[before:]
-    params = {f"{e['effect']}.{k}" if len(new) > 1 else k: v for e in new for k, v in e.items() if k not in ("effect", "where")}
-    return {"effect": "+".join(e["effect"] for e in new), "where": result["where"], "parameters": params,
-            "units": {k: u for e in new for k, u in units_at(data, e["effect"], e["where"]).items()},
-            "validation_nrmse": result["held_out"]["nrmse"], "validation_noise_ratio": result["held_out"]["noise_ratio"],
-            "instead_of": chosen["effect"],
-            "why_not_chosen": (f"validation {result['held_out']['noise_ratio']:.3f} x the noise against "
-                               f"{chosen['held_out']['noise_ratio']:.3f} x for {chosen['effect']} at {chosen['where']} "
-                               f"(score {result['score']:.3f} vs {chosen['score']:.3f}, {result['n_params']} parameters): "
-                               "within noise of each other, the data cannot tell them apart"),
-            "model": {"effects": result["model"].effects, "parameters": result["model"].parameters}}
-
-
-def beyond_tolerance(data: Data, model: Model) -> list:
-    """Candidates for a rig parameter at (AT_BOUND of) its tolerance bound whose knob a catalogue effect turns
-    (a link's EI: link_stiffness_change at that link; a sensor or actuator gain): the datasheet may be wrong
-    beyond its tolerance (issue 14: a parameter far outside its tolerance is a finding, not a silent clamp).
-    Such a round runs even when the model is within the noise, since bounded parameters can absorb it, and such
-    a candidate is not held to a later finding's excess rule (seed 43: a laser beam 36 % softer beside a 5 ms
-    delay ended at 1.17 x the noise with the beam's EI, hub and motor inertia at their bounds, the stiffness change
-    rejected for removing 6 % of the tip sensor's excess though it gained 14 % on training and 3.5 % on
-    validation). What it finds within tolerance, combined with the refit ratio, is folded back
-    (fold_within_tolerance): only a change beyond the tolerance becomes a finding."""
-    taken = {(e["effect"], e["where"]) for e in model.effects}
-    out = []
-    for entry in at_bounds(data, model):
-        for effect, knob in KNOB_OF.items():
-            where = entry["target"]
-            if (knob == entry["knob"] and where in data.rig.effects.get(effect, []) and (effect, where) not in taken
-                    and excited(data, effect, where)):
-                out.append(make_candidate(data, effect, where))
-    return out
-
-
-def fold_within_tolerance(data: Data, model: Model) -> Model:
-    """An effect that turns a knob the rig refits (a sensor or actuator gain, a link's stiffness or damping)
-    and, combined with the refit ratio, stays within that parameter's tolerance is parameter error, not
-    missing physics: it goes into the refit parameters."""
-    effects, parameters = [], dict(model.parameters)
-    for effect in model.effects:
-        name = knob_partner(data, effect)
-        if name is not None:
-            ratio = parameters.get(name, 1.0) * effect["ratio"]
-            if abs(ratio - 1) <= data.rig.parameters[name]["tolerance"]:
-                parameters[name] = ratio
-                continue
-        effects.append(effect)
-    return Model(effects, parameters)
-
-
 def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> tuple[Model, list, list[dict]]:
     """Backward elimination: drop, one at a time, the effect whose removal from the final model leaves
     validation best, while that is no worse than MIN_HELD_GAIN (what a finding had to gain to enter);
@@ -476,98 +423,6 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
                             [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
     new = runner.simulate(refit)
     return (refit, new) if new is not None else (model, sims)
-
-
-def at_bounds(data: Data, model: Model) -> list[dict]:
-    """Refit parameters at (AT_BOUND of) their tolerance: what the datasheet may have wrong, or an
-    effect the parameter is absorbing."""
-    out = []
-    for name, spec in data.rig.parameters.items():
-        ratio = model.parameters.get(name, 1.0)
-        if abs(ratio - 1) >= AT_BOUND * spec["tolerance"]:
-            out.append({"parameter": name, "ratio": ratio, "tolerance": spec["tolerance"], "knob": spec["knob"],
-                        "target": spec["target"]})
-    return out
-
-
-def polish(data: Data, runner: Runner, result: dict, rig_start: dict[str, float] | None = None) -> dict:
-    """Carry the chosen candidate's fit on from a fresh finite-difference Jacobian at its solution,
-    each simulation split over the workers; keep it if the training fit improved.
-
-    With `rig_start` (rig parameter ratios; {}: the datasheet's values) the fit is also started from the
-    effects found with the rig's parameters there, and the start whose polished model fits the training
-    data better is kept. The rig's parameters fitted while physics was missing absorbed some of it (the
-    README demo: with only the stiction in, beam EI x1.009 and motor inertia x1.015; the slip fitted from
-    there stopped at 1.36 x the noise on validation, and a spurious viscous term was found next; from the
-    datasheet's values the same fit reaches 0.84 x with every ratio within 0.13 % of 1. A Watflex elbow
-    Coulomb friction of 0.54 N m, from the refit rig: 0.29 N m with the friction scale at its bound;
-    from the datasheet: 0.51 N m)."""
-    free = result["free"]
-    start = [value_of(result["model"], s) for s in free]
-    model, cost, J = levenberg(evaluator(runner), result["model"], free, start, None, POLISH_ITERATIONS)
-    moved = [value_of(model, s) for s in free] != start
-    out = result
-    if moved:
-        sims = runner.simulate(model)
-        out = result if sims is None else scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
-    if rig_start is None:
-        return out
-    restart = Model([dict(e) for e in result["model"].effects], dict(rig_start))
-    restart = unpack([min(max(value_of(restart, s), s.low), s.high) for s in free], free, restart)
-    if restart.parameters == result["model"].parameters:
-        return out
-    model, cost, J = levenberg(evaluator(runner), restart, free, [value_of(restart, s) for s in free], None, POLISH_ITERATIONS)
-    sims = runner.simulate(model)
-    if sims is None:
-        return out
-    other = scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
-    return other if other["train"]["noise_ratio"] < out["train"]["noise_ratio"] else out
-
-
-def offset_alternative(data: Data, runner: Runner, base: Model, result: dict) -> dict | None:
-    """Asymmetric Coulomb levels a (positive) != b (negative) are also symmetric friction plus a
-    constant actuator bias f = (b - a)/2 pushing the positive way: the two cannot be told apart
-    in steady sliding, only at rest. Fit that alternative (as many parameters) jointly with the
-    rig's parameters and return it scored like a candidate, or None if it does not apply."""
-    if result["effect"] != "coulomb_friction":
-        return None
-    found = result["model"].effects[-1]
-    a, b, where = found["torque_positive"], found["torque_negative"], found["where"]
-    channel = next((c for c in data.rig.effects.get("actuator_offset", [])
-                    if data.rig.channels.get(c, {}).get("joint") == where), None)
-    if channel is None or abs(a - b) <= 0.05 * (a + b) / 2:
-        return None
-    gain = data.rig.effort_per_unit(channel)  # N m (N) per command unit
-    trial = Model(base.effects + [dict(effect="coulomb_friction", where=where, torque_positive=(a + b) / 2, torque_negative=(a + b) / 2),
-                                  dict(effect="actuator_offset", where=channel, offset=(b - a) / 2 / gain)],
-                  dict(result["model"].parameters))
-    i = len(trial.effects) - 2
-    free = [Slot(("effect", i, ("torque_positive", "torque_negative")), 0.0, 2 * max(a, b)),
-            Slot(("effect", i + 1, "offset"), -2 * abs(a - b) / gain, 2 * abs(a - b) / gain)] + rig_slots(data)
-    x0 = [(a + b) / 2, (b - a) / 2 / gain] + [value_of(trial, s) for s in rig_slots(data)]
-    try:
-        model, cost, J = levenberg(evaluator(runner), trial, free, x0, iters=12)
-    except Exception:  # noqa: BLE001 - the alternative diverging just means it is not taken
-        return None
-    sims = runner.simulate(model)
-    if sims is None:
-        return None
-    return scored(data, {"effect": "coulomb_friction", "where": where, "model": model, "n_params": 2, "cost": cost,
-                         "free": free, "J": J}, sims)
-
-
-def single_from_pair(data: Data, runner: Runner, single: dict, pair: dict) -> dict | None:
-    """The asymmetric Coulomb friction `single` polished again from the levels the friction + offset
-    `pair` stands for (positive c - f gain, negative c + f gain): on stick-slip data the single's own fit
-    can stop in a valley far from them, and a tie must not go to the pair for that. None if it diverges."""
-    friction, offset = pair["model"].effects[-2], pair["model"].effects[-1]
-    gain = data.rig.effort_per_unit(offset["where"])  # N m (N) per command unit
-    c, f = friction["torque_positive"], offset["offset"] * gain
-    model = Model([*single["model"].effects[:-1], {**single["model"].effects[-1], "torque_positive": max(c - f, 0.0),
-                                                   "torque_negative": max(c + f, 0.0)}], dict(pair["model"].parameters))
-    model = unpack([min(max(value_of(model, s), s.low), s.high) for s in single["free"]], single["free"], model)
-    sims = runner.simulate(model)
-    return None if sims is None else polish(data, runner, scored(data, {**single, "model": model}, sims))
 
 
 def _scores(data: Data, sims: list[Recording], model: Model) -> dict:

@@ -21,6 +21,7 @@ from .data import Data, Model, residual_vector, unit_change
 from .fitting import Slot, at_internal, intervals, jacobian, levenberg, residual_variance, rig_slots, value_of
 from .runner import Runner, evaluator
 from .screening import effect_slots_of
+from .tolerance import knob_partner
 
 SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
 FINER = 2  # the discretisation error is judged against this many times the segments and a step this much finer
@@ -29,16 +30,7 @@ FINER_ITERATIONS = 4  # Levenberg-Marquardt steps of the refit on the finer mode
 DISCRETISATION_REACH = 2.0  # x how far the finer refit moves an estimate: the interval's reach towards a converged
 # model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
 REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
-KNOB_OF = {"sensor_gain": "sensor_gain", "actuator_gain": "actuator_gain", "link_stiffness_change": "chain_stiffness",
-           "structural_damping": "chain_damping"}  # effects that turn a knob the rig may refit: within tolerance, not physics
 SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
-
-
-def knob_partner(data: Data, effect: dict) -> str | None:
-    """The rig parameter that turns the same knob as `effect` (a link's stiffness change and that link's EI:
-    the residual depends on their product only), or None."""
-    knob = KNOB_OF.get(effect["effect"])
-    return next((n for n, p in data.rig.parameters.items() if (p["knob"], p["target"]) == (knob, effect["where"])), None)
 
 
 def in_units(evaluate, per: np.ndarray):
