@@ -8,15 +8,13 @@ from scipy.optimize import brentq
 
 
 def _frequencies(beam, f, n_modes: int) -> np.ndarray:
-    """The first `n_modes` roots lambda of the frequency equation f(lambda) = 0, as natural
-    frequencies omega = lambda^2 sqrt(EI / (rho L^4)) (rad/s)."""
+    """The first `n_modes` roots lambda of the frequency equation f(lambda, lib) = 0 (lib: math for a
+    number, numpy for the grid the roots are bracketed on), as natural frequencies
+    omega = lambda^2 sqrt(EI / (rho L^4)) (rad/s)."""
     roots, grid = [], np.linspace(1e-3, 4 * (n_modes + 1), 4000 * (n_modes + 1))
-    values = [f(x) for x in grid]
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], values[:-1], values[1:]):
-        if fa * fb < 0:
-            roots.append(brentq(f, a, b, xtol=1e-14))
-            if len(roots) == n_modes:
-                break
+    values = f(grid, np)
+    for k in np.flatnonzero(values[:-1] * values[1:] < 0)[:n_modes]:
+        roots.append(brentq(f, grid[k], grid[k + 1], args=(math,), xtol=1e-14))
     lam = np.array(roots)
     return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
 
@@ -31,8 +29,8 @@ def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3) -> np.ndar
     """
     mu = tip_mass / (beam.mass_per_length * beam.length)
 
-    def f(lam: float) -> float:
-        c, s, ch, sh = math.cos(lam), math.sin(lam), math.cosh(lam), math.sinh(lam)
+    def f(lam, lib):
+        c, s, ch, sh = lib.cos(lam), lib.sin(lam), lib.cosh(lam), lib.sinh(lam)
         # divided by cosh to keep the function O(1) for large lambda
         return (1.0 + c * ch + mu * lam * (c * sh - s * ch)) / ch
 
@@ -67,8 +65,8 @@ def clamped_tip_body_frequencies(beam, mass: float, offset: float, n_modes: int 
     """
     mu, eps = mass / (beam.mass_per_length * beam.length), offset / beam.length
 
-    def f(lam: float) -> float:
-        c, s, ch, sh = math.cos(lam), math.sin(lam), math.cosh(lam), math.sinh(lam)
+    def f(lam, lib):
+        c, s, ch, sh = lib.cos(lam), lib.sin(lam), lib.cosh(lam), lib.sinh(lam)
         # columns: coefficients of A and B in w, L w', L^2 w'', L^3 w''' at x = L
         w = (c - ch, s - sh)
         w1 = (lam * (-s - sh), lam * (c - ch))
