@@ -63,13 +63,17 @@ def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
     for i, loop in enumerate(loops):
         groups.setdefault((structure(loop.model), loop.n_sub), []).append(i)
     out: list = [None] * len(loops)
-    for members in groups.values():
-        if len(members) == 1 or not (always or _pays([loops[i] for i in members])):  # the single-run driver
-            for i in members:  # is cheaper here (same recordings)
-                out[i] = _alone(loops[i])
-            continue
-        for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
-            out[i] = result
+    for group in groups.values():
+        columnar = [i for i in group if ColumnControl.fits([loops[i]])]  # a member whose control half has no
+        for members in (columnar, [i for i in group if i not in columnar]):  # column form runs apart, not the whole group
+            if not members:
+                continue
+            if len(members) == 1 or not (always or _pays([loops[i] for i in members])):  # the single-run driver
+                for i in members:  # is cheaper here (same recordings)
+                    out[i] = _alone(loops[i])
+                continue
+            for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
+                out[i] = result
     return out
 
 
