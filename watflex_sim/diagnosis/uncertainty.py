@@ -6,7 +6,8 @@ by: the data's noise (the Jacobian, widened for serial correlation and for the r
 closed loop: `fitting.intervals`), the split of the data (the estimate from the training half alone), our
 own discretisation (`finer_refit`) and a cost that stick-slip makes rough (`slice_reach`: the estimate
 is known only up to where the cost's smooth trend rises above its roughness). Knob-tied pairs (an
-effect's ratio and the rig parameter turning the same knob) share one Jacobian column.
+effect's ratio and the rig parameter turning the same knob) share one Jacobian column, and the ratio's
+interval also spans the datasheet's split of their product (`nominal_split`).
 """
 from __future__ import annotations
 
@@ -160,7 +161,7 @@ def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray
         departure = c - np.polyval(np.polyfit(x, c, 2), x)
         roughness = math.sqrt(float(departure @ departure) / (x.size - 3))
     threshold = min(cost0, float(costs.min(initial=math.inf))) + max(1.96**2 / 2 * residual_variance(r, len(slots)), 1.96 * roughness)
-    kept = [x for x, c in zip(points, costs) if c <= threshold]
+    kept = [p for p, q in zip(points, costs) if q <= threshold]
     return slot.to_value(min([a] + kept)), slot.to_value(max([b] + kept))
 
 
