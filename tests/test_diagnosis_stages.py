@@ -144,6 +144,28 @@ def test_a_nuisance_traded_off_widens_an_interval_by_its_prior():
     assert (joint[1] - joint[0]) > 3 * (alone[1] - alone[0])
 
 
+def test_an_interval_reaches_along_a_valley_to_the_datasheets_value():
+    """y = (a + b) t + noise, the fit left the rig parameter b at its tolerance bound 1.05 (datasheet 1.0, prior
+    sd 0.05 / sqrt 3) and a at 1.95, the truth a = 2.05 at b's other bound 0.95: the data fix only a + b, so the
+    step to the posterior's mode moves b back to 1.0 and a up by 0.05, and the prior's 95 % half-width (1.96 x
+    0.029) reaches 2.057 - past the truth with the prior's mean given, not without it (2.007; seed 48's payload
+    1.6 % short with the hub's inertia at +3 %)."""
+    from watflex_sim.diagnosis.uncertainty import tolerance_centre, tolerance_sd
+
+    t = np.linspace(0, 1, 200)
+    y = 3.0 * t + 0.01 * np.random.default_rng(0).normal(size=t.size)
+    a = float(t @ y / (t @ t)) - 1.05
+    slots = [Slot(("effect", 0, "a"), -10, 10), Slot(("param", "b"), 0.95, 1.05)]
+    model = Model([{"effect": "x", "a": a}], {"b": 1.05})
+    J, r = np.column_stack([t, t]), (a + 1.05) * t - y
+    prior = [tolerance_sd(s) for s in slots]
+    assert [tolerance_centre(s) for s in slots][1] == pytest.approx(1.0)
+    without = intervals(slots, model, J, r, prior)[0]
+    with_mean = intervals(slots, model, J, r, prior, prior_mean=[tolerance_centre(s) for s in slots])[0]
+    assert without[1] < 2.05 < with_mean[1]
+    assert with_mean[0] == pytest.approx(without[0], abs=1e-12)
+
+
 def test_direction_follows_the_final_parameters():
     """A level per direction that is ~0 one way is one-sided; equal levels are 'both' (issue 14's
     stale label: 'both' with torque_positive 1e-28)."""
@@ -245,6 +267,19 @@ def test_a_link_stiffness_is_probed_stiffer_as_well_as_softer(laser_recordings):
 
     cand = make_candidate(prepare(laser_recordings, ["a", "b"]), "link_stiffness_change", "beam")
     assert sorted(round(v["ratio"], 3) for v in cand.probes().values()) == [0.6, 0.9, 2.0]
+
+
+def test_a_friction_level_is_probed_small_as_well_as_large(laser_recordings):
+    """Coulomb friction's levels are probed at 0.25, 1 and 4 x their start (0.1 x the peak effort), each
+    level on its own: stick-slip's signature depends on the size (seed 48, a laser hub's 0.045 N m screened
+    at 1 % from probes at 1 and 4 x and 18 % once probed at 0.25 x)."""
+    from watflex_sim.diagnosis.screening import make_candidate
+
+    cand = make_candidate(prepare(laser_recordings, ["a", "b"]), "coulomb_friction", "hub")
+    start = cand.start["torque_positive"]
+    probes = cand.probes()
+    assert sorted(level for level, name in probes if name == "torque_positive") == [0.25, 1.0, 4.0]
+    assert probes[(0.25, "torque_positive")] == {"torque_positive": pytest.approx(0.25 * start), "torque_negative": 0.0}
 
 
 def _camera_and_strain(k_true=0.98):

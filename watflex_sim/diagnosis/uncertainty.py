@@ -47,6 +47,12 @@ def tolerance_sd(slot: Slot) -> float:
     return slot.span() / 2 / math.sqrt(3) if slot.where[0] == "param" else math.inf
 
 
+def tolerance_centre(slot: Slot) -> float:
+    """Prior mean (internal units) of a rig parameter's slot: the datasheet's value, the centre of its
+    +-tolerance; nan (no prior) for an effect's parameter."""
+    return slot.to_internal((slot.low + slot.high) / 2) if slot.where[0] == "param" else math.nan
+
+
 def tie_knob_columns(data: Data, model: Model, slots: list[Slot], J: np.ndarray) -> np.ndarray:
     """J with the column of each rig parameter that turns the same knob as an effect's ratio (knob_partner)
     derived from the effect's column: the residual depends on ratio x e only, so d r / d e =
@@ -67,7 +73,7 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     A quantised parameter (a delay) is good to half its step. The Jacobian's interval is over every
     effect parameter and rig parameter together, those at a bound too (a friction side near 0 that
     trades off with a viscous term widens it), the rig's with their tolerance as a prior (the sd of a uniform
-    spread over +-tolerance, tolerance / sqrt 3). An effect that turns a rig parameter's knob (a link's stiffness
+    spread over +-tolerance, tolerance / sqrt 3, about the datasheet's value). An effect that turns a rig parameter's knob (a link's stiffness
     change and its EI) has one Jacobian column for both, so their product alone is fixed by the data: finite
     differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a +-5 % tolerance) made the two look
     separable (seed 6: a link stiffness 4.8 % off with an interval of +-0.05 %, the EI at its bound).
@@ -98,7 +104,8 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
     replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
     fine = finer_refit(data, runner, model, slots, J, per)
-    for k, (low, high) in intervals(slots, model, J, r, prior, replicates).items():
+    centre = [tolerance_centre(s) for s in slots]
+    for k, (low, high) in intervals(slots, model, J, r, prior, replicates, centre).items():
         slot = slots[k]
         if slot.where[0] == "effect":
             value = slot.to_internal(value_of(model, slot))
