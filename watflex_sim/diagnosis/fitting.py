@@ -282,8 +282,8 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
     cov = np.linalg.pinv(J.T @ J / s2 + np.diag(prior)) if s2 > 0 else np.zeros((p, p))
     k = huber_threshold(r)
     weights = np.where(np.abs(r) <= k, 1.0, k / np.maximum(np.abs(r), 1e-300))
-    u0 = np.array([slot.to_internal(value_of(model, slot)) for slot in free])
-    pull = prior * (u0 - np.nan_to_num(np.array(prior_mean, float))) if prior_mean is not None else np.zeros(p)
+    u = np.array([slot.to_internal(value_of(model, slot)) for slot in free])
+    pull = prior * (u - np.nan_to_num(np.array(prior_mean, float))) if prior_mean is not None else np.zeros(p)
     newton = (-np.linalg.pinv(J.T @ (weights[:, None] * J) + s2 * np.diag(prior)) @ (J.T @ (weights * r) + s2 * pull)
               if s2 > 0 else np.zeros(p))
     shift, scatter = np.zeros(p), np.zeros(p)
@@ -292,13 +292,12 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
         shift, scatter = moves.mean(axis=0), moves.std(axis=0, ddof=1)
     out = {}
     for i, slot in enumerate(free):
-        u = slot.to_internal(value_of(model, slot))
         sd = math.sqrt(max(float(cov[i, i]), 0.0))
         if not np.any(J[:, i]) or not math.isfinite(sd):
             out[i] = (slot.low, slot.high)
             continue
         half = max(1.96 * sd, T_REPLICATES * float(scatter[i]))
-        reach = (u, u - shift[i], u + newton[i])
+        reach = (u[i], u[i] - shift[i], u[i] + newton[i])
         lo, hi = slot.to_value(min(reach) - half), slot.to_value(max(reach) + half)
         out[i] = (float(max(lo, slot.low)), float(min(hi, slot.high)))
     return out
