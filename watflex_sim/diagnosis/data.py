@@ -2,8 +2,8 @@
 spreads and noise levels, and the training/validation split.
 
 Contract: `prepare(recordings, names)` returns the same `Data` whatever order the files come in
-(they are sorted by name, then content). Every recording is split into pairs of short time
-blocks, one of each pair training the fits and the other validating them, so every regime the data has (directions,
+(they are sorted by name, then content). Every recording is split into alternate time blocks:
+even blocks train the fits, odd blocks validate them, so every regime the data has (directions,
 payloads, rest, saturation, reversals) is judged on samples the fit did not see. Residuals are in
 two units: the channel's spread (what fits minimise, `residual_vector`) and the channel's noise
 (what verdicts judge, `noise_ratio`: 1 = the model is as close as the noise allows).
@@ -22,9 +22,8 @@ from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
-BLOCK_S = 0.025  # s: split block; a pair of blocks has one of each half, so any stretch of 3 blocks (a step's
-# transient of 75 ms and longer) is at least a third training and a third validation
-MIN_BLOCK_SAMPLES = 8  # samples: a block holds at least this many (slowly sampled recordings get longer blocks)
+BLOCKS_PER_RECORDING = 60  # alternate blocks per recording (train, validate, train, ...): short enough that a transient is split
+BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
 MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate and diagnose
@@ -86,19 +85,20 @@ def measured_noise(values: np.ndarray) -> float:
 
 
 def split_blocks(time: np.ndarray) -> tuple[np.ndarray, float]:
-    """Training mask of one recording and the block length (s): consecutive pairs of short blocks,
-    one of each pair fitting and the other validating (a fixed pseudo-random choice, the first block
-    always training), so a transient anywhere is in both halves, and a periodic experiment (pulses,
-    a triangle wave) cannot fall into one half only as it would with strictly alternate blocks;
-    samples after FIT_SECONDS only validate."""
+    """Training mask of one recording and the block length (s): blocks of equal length, half of them
+    (a fixed pseudo-random choice, the first block always training) fit and half validate, so a
+    periodic experiment (pulses, a triangle wave) cannot fall into one half only, as it would with
+    strictly alternate blocks; samples after FIT_SECONDS only validate."""
     t = time - time[0]
-    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    block = max(BLOCK_S, MIN_BLOCK_SAMPLES * step)
-    index = np.floor(t / block + 1e-9).astype(int)  # + 1e-9: a sample at a block's start (k x 1 ms) is in it
-    pairs = int(index[-1]) // 2 + 1
-    first = np.random.default_rng(SPLIT_SEED).integers(0, 2, pairs)  # which block of each pair trains
-    first[0] = 0  # the start (initial conditions) is always fitted
-    return (index % 2 == first[index // 2]) & (t < FIT_SECONDS), block
+    block = float(np.clip(t[-1] / BLOCKS_PER_RECORDING, *BLOCK_LIMITS_S))
+    index = (t // block).astype(int)
+    n = int(index[-1]) + 1
+    order = np.random.default_rng(SPLIT_SEED).permutation(n)
+    training = np.zeros(n, bool)
+    training[order[: (n + 1) // 2]] = True
+    if not training[0]:  # the start (initial conditions) is always fitted: swap it with a training block
+        training[order[(n + 1) // 2 - 1]], training[0] = False, True
+    return training[index] & (t < FIT_SECONDS), block
 
 
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
@@ -130,9 +130,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         train.append(mask)
         blocks.append(block)
     longer = any(r.time[-1] - r.time[0] > FIT_SECONDS for r in recordings)
-    lengths = "-".join(sorted({f"{b * 1e3:.3g}" for b in (min(blocks), max(blocks))}, key=float))
-    how = (f"every recording in pairs of {lengths} ms blocks, one of each pair (a fixed "
-           f"pseudo-random choice) fitted, the other validates" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
+    how = (f"every recording in blocks of {min(blocks):.2g}-{max(blocks):.2g} s, half of them (a fixed pseudo-random "
+           f"choice) fitted, the other half validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
            + "; the same regimes in both, whatever the file order")
     return Data(recordings, names, rig, channels, scale, noise, train, how)
 
