@@ -75,9 +75,9 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     trades off with a viscous term widens it), the rig's with their tolerance as a prior (the sd of a uniform
     spread over +-tolerance, tolerance / sqrt 3, about the datasheet's value). An effect that turns a rig
     parameter's knob (a link's stiffness change and its EI) has one Jacobian column for both, so their product
-    alone is fixed by the data: finite
-    differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a +-5 % tolerance) made the two look
-    separable (seed 6: a link stiffness 4.8 % off with an interval of +-0.05 %, the EI at its bound).
+    alone is fixed by the data: finite differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a
+    +-5 % tolerance) made the two look separable (seed 6: a link stiffness 4.8 % off with an interval of
+    +-0.05 %, the EI at its bound).
     The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
     the final model's simulations, where larger), and REPLICATES simulations of the
     final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
