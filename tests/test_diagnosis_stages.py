@@ -526,7 +526,7 @@ def test_the_polish_also_starts_from_the_rig_as_its_datasheet_says(monkeypatch):
     from watflex_sim.diagnosis import refine
 
     monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
-    monkeypatch.setattr(refine, "evaluator", lambda runner: None)
+    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
     monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "train": {"noise_ratio": sims}})
 
     class Runner:
@@ -581,7 +581,7 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     from watflex_sim.diagnosis import uncertainty
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
     from watflex_sim.diagnosis.fitting import jacobian, levenberg, value_of
-    from watflex_sim.diagnosis.runner import Runner, evaluator
+    from watflex_sim.diagnosis.runner import Runner, evaluator, in_units
     from watflex_sim.diagnosis.screening import effect_slots_of
 
     truth = 0.4  # kg
@@ -597,11 +597,11 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
         start = Model([{"effect": "payload", "where": "tip", "mass": 0.3}])
         slots = effect_slots_of(data, start)
         per = unit_change(data, "all", sims=runner.simulate(start))
-        evaluate = uncertainty.in_units(evaluator(runner, "all"), per)
+        evaluate = in_units(evaluator(runner, "all"), per)
         ours = levenberg(evaluate, start, slots, [0.3], iters=10)[0]
         sims = runner.simulate(ours)
         per = unit_change(data, "all", sims=sims)
-        evaluate = uncertainty.in_units(evaluator(runner, "all"), per)
+        evaluate = in_units(evaluator(runner, "all"), per)
         u = np.array([s.to_internal(value_of(ours, s)) for s in slots])
         J = jacobian(evaluate, ours, slots, u, evaluate([ours])[0])
         fine = uncertainty.finer_refit(data, runner, ours, slots, J, per)
@@ -671,3 +671,40 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     assert canonical(positive) is positive
     quarter = dict(found, phase=-math.pi / 2)  # shifted to +pi/2 = -phase: moved by pi, not mirrored
     assert _canonical(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))
+
+
+def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin():
+    """scan_period(): a ripple's residual is far from convex in its period (seed 52: a 0.77 rad Watflex elbow ripple
+    fitted at 1.35 rad from the start at 3 x the motion's range, 5 x the noise left). On a stand-in whose residual is
+    the ripple's torque along 0.54 rad of motion (exactly linear in a sin + b cos at a given period), the scan
+    from the screening's start (period 1.63 rad, a spring absorbing part of the ripple) must land within the ladder's
+    spacing of the true 0.77 rad (neighbouring periods drift at most half a cycle apart over the range; the rung
+    nearest 0.77 is 0.761, 1 % off) with amplitude and phase near the truth, and cost a tenth of the start's."""
+    from watflex_sim.diagnosis.screening import Candidate, period_ladder, scan_period
+
+    motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
+
+    def torque(e):
+        return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
+
+    truth = {"amplitude": 0.85, "period": 0.77, "phase": -2.575, "spring": 0.0}
+
+    def evaluate(models):
+        return [torque(m.effects[-1]) - torque(truth) for m in models]
+
+    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
+             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
+                     slots, {"amplitude": 0.0, "spring": 0.0})
+    start = {"amplitude": -1.77, "period": 1.63, "phase": 0.0, "spring": 4.32}  # seed 52's screening estimate
+    cost = lambda r: float(r @ r)  # noqa: E731
+    none = np.zeros((x.size, 0))
+    found = scan_period(evaluate, cand, Model(), start, cost, none, np.zeros(0), np.zeros(0), np.zeros(0))
+    ladder = period_ladder(slots["period"], motion)
+    assert min(ladder) == pytest.approx(0.2 * motion) and 4 * motion < max(ladder) <= 8 * motion
+    drift = -np.diff(motion / np.array(ladder))  # cycles of phase over the range between neighbouring periods
+    assert np.all(drift <= 0.5 + 1e-9)  # half a cycle: the truth is at most a quarter cycle from a rung
+    assert abs(found["period"] / truth["period"] - 1) < 0.02
+    assert abs(found["amplitude"] - truth["amplitude"]) < 0.1 * truth["amplitude"]
+    assert abs(found["phase"] - truth["phase"]) < 0.2  # rad
+    assert cost(evaluate([cand.model(Model(), found)])[0]) < 0.1 * cost(evaluate([cand.model(Model(), start)])[0])

@@ -5,8 +5,9 @@ Contract: `prepare(recordings, names)` returns the same `Data` whatever order th
 (they are sorted by name, then content). Every recording is split into alternate time blocks:
 even blocks train the fits, odd blocks validate them, so every regime the data has (directions,
 payloads, rest, saturation, reversals) is judged on samples the fit did not see. Residuals are in
-two units: the channel's spread (what fits minimise, `residual_vector`) and the channel's noise
-(what verdicts judge, `noise_ratio`: 1 = the model is as close as the noise allows).
+two units: the channel's spread (what the screening compares, `residual_vector`) and the channel's noise
+(what fits minimise and verdicts judge, `unit_change`, `noise_ratio`: 1 = the model is as close as the
+noise allows).
 """
 from __future__ import annotations
 
@@ -183,9 +184,9 @@ def in_part(train: np.ndarray, part: str) -> np.ndarray:
 
 def residual_vector(data: Data, sims: list[Recording], part: str = "train", stride: int = STRIDE,
                     only: int | None = None, unit: str = "spread") -> np.ndarray:
-    """(simulated - measured) / spread over a part, every `stride` samples (what the effect fits minimise);
+    """(simulated - measured) / spread over a part, every `stride` samples (what the screening compares);
     `unit` "noise": / the channel's noise instead (what the verdict judges; the refit of the rig's
-    parameters minimises that, `unit_change`)."""
+    parameters and the effect fits minimise that, `unit_change`)."""
     pieces = []
     units = data.scale if unit == "spread" else data.noise
     for i, (rec, sim, chans, scale, train) in enumerate(zip(data.recordings, sims, data.channels, units, data.train)):

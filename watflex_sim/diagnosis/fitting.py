@@ -75,12 +75,17 @@ def internal_start(free: list[Slot], x0) -> tuple[np.ndarray, np.ndarray, np.nda
 def refit_cost(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     """Sum of squares of the residual r once the slots of Jacobian J (internal units, at u, bounds lo..hi)
     are re-optimised to first order: min over the bounded step d of |r + J d|^2."""
+    return refit_step(J, r, u, lo, hi)[0]
+
+
+def refit_step(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, np.ndarray]:
+    """(refit_cost, the step d that reaches it)."""
     if J.shape[1] == 0:
-        return float(r @ r)
+        return float(r @ r), np.zeros(0)
     span = np.where(hi > lo, hi - lo, 1.0)
     A = J * span
     z = lsq_linear(A, -r, bounds=((lo - u) / span, np.maximum(hi - u, lo - u + 1e-12) / span)).x
-    return float(np.sum((r + A @ z) ** 2))
+    return float(np.sum((r + A @ z) ** 2)), z * span
 
 
 def value_of(model: Model, slot: Slot) -> float:

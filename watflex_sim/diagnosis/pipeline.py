@@ -26,11 +26,11 @@ from .explain import finding, indistinct
 from .fitting import compass, jacobian, levenberg, rig_slots, value_of
 from .locate import locate
 from .refine import POLISH_ITERATIONS, alternative_entry, offset_alternative, polish, single_from_pair
-from .runner import Runner, evaluator
+from .runner import Runner, evaluator, in_units
 from .screening import (FIT_ITERATIONS, MIN_GAIN, RESCREEN, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
                         make_candidate, rescreen, screen, scored, shortlist, signatures)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance, knob_partner
-from .uncertainty import FINER, NOISE_SEED, final_intervals, in_units
+from .uncertainty import FINER, NOISE_SEED, final_intervals
 
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
@@ -175,7 +175,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         current = compass(evaluate, current, free, [value_of(current, s) for s in free],
                           residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION)
         sims = runner.simulate(current)
-    rig_columns = rig_columns * unit_change(data)[:, None]  # the screening and the effect fits work in spread units
+    rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
     say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
@@ -225,7 +225,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
-        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle) for c in top])
+        per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
+        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle, per) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [_gains(scored(data, r, r["sims"]), train, held)  # scored here, where
                   for r in results if "error" not in r]  # the data has the closed-loop noise the workers' copies lack

@@ -7,13 +7,19 @@ chosen one for the report. Each returns a result scored like a candidate (screen
 """
 from __future__ import annotations
 
-from .data import Data, Model
+from .data import Data, Model, unit_change
 from .explain import units_at
 from .fitting import Slot, levenberg, rig_slots, unpack, value_of
-from .runner import Runner, evaluator
+from .runner import Runner, evaluator, in_units
 from .screening import scored
 
 POLISH_ITERATIONS = 6
+
+
+def in_noise(data: Data, runner: Runner):
+    """Training residuals in noise units, with the closed-loop floor (what the effect fits minimise:
+    screening.fit_candidate)."""
+    return in_units(evaluator(runner), unit_change(data))
 
 
 def alternative_entry(data: Data, result: dict, chosen: dict, before: int) -> dict:
@@ -46,7 +52,7 @@ def polish(data: Data, runner: Runner, result: dict, rig_start: dict[str, float]
     from the datasheet: 0.51 N m)."""
     free = result["free"]
     start = [value_of(result["model"], s) for s in free]
-    model, cost, J = levenberg(evaluator(runner), result["model"], free, start, None, POLISH_ITERATIONS)
+    model, cost, J = levenberg(in_noise(data, runner), result["model"], free, start, None, POLISH_ITERATIONS)
     moved = [value_of(model, s) for s in free] != start
     out = result
     if moved:
@@ -58,7 +64,7 @@ def polish(data: Data, runner: Runner, result: dict, rig_start: dict[str, float]
     restart = unpack([min(max(value_of(restart, s), s.low), s.high) for s in free], free, restart)
     if restart.parameters == result["model"].parameters:
         return out
-    model, cost, J = levenberg(evaluator(runner), restart, free, [value_of(restart, s) for s in free], None, POLISH_ITERATIONS)
+    model, cost, J = levenberg(in_noise(data, runner), restart, free, [value_of(restart, s) for s in free], None, POLISH_ITERATIONS)
     sims = runner.simulate(model)
     if sims is None:
         return out
@@ -88,7 +94,7 @@ def offset_alternative(data: Data, runner: Runner, base: Model, result: dict) ->
             Slot(("effect", i + 1, "offset"), -2 * abs(a - b) / gain, 2 * abs(a - b) / gain)] + rig_slots(data)
     x0 = [(a + b) / 2, (b - a) / 2 / gain] + [value_of(trial, s) for s in rig_slots(data)]
     try:
-        model, cost, J = levenberg(evaluator(runner), trial, free, x0, iters=12)
+        model, cost, J = levenberg(in_noise(data, runner), trial, free, x0, iters=12)
     except Exception:  # noqa: BLE001 - the alternative diverging just means it is not taken
         return None
     sims = runner.simulate(model)

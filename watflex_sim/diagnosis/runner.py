@@ -179,3 +179,10 @@ def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread"):
             out.append(None if any(p is None for p in mine) else np.concatenate(mine))
         return out
     return evaluate
+
+
+def in_units(evaluate, per: np.ndarray):
+    """An evaluator of residuals in spread units turned to the units `per` (`data.unit_change`, computed in
+    the main process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
+    copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
+    return lambda models: [None if r is None else r / per for r in evaluate(models)]

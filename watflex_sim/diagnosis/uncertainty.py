@@ -20,7 +20,7 @@ from ..engine import SimulationError
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
 from .fitting import Slot, at_internal, intervals, jacobian, levenberg, residual_variance, rig_slots, value_of
-from .runner import Runner, evaluator
+from .runner import Runner, evaluator, in_units
 from .screening import effect_slots_of
 from .tolerance import knob_partner
 
@@ -32,13 +32,6 @@ DISCRETISATION_REACH = 2.0  # x how far the finer refit moves an estimate: the i
 # model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
 REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
 SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
-
-
-def in_units(evaluate, per: np.ndarray):
-    """An evaluator of residuals in spread units turned to the units `per` (`unit_change`, computed in
-    this process: its noise has the closed-loop noise floor, add_closed_loop_noise, which the workers'
-    copies of the data lack; with the model's simulations, a channel's misfit where that is larger)."""
-    return lambda models: [None if r is None else r / per for r in evaluate(models)]
 
 
 def tolerance_sd(slot: Slot) -> float:
