@@ -187,6 +187,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         finer = runner.simulate(current, finer=FINER)
         if finer is not None:
             add_discretisation_error(data, sims, finer)
+    per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
     mismatch = locate(data, sims)
@@ -225,7 +226,6 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
-        per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
         results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle, per) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [_gains(scored(data, r, r["sims"]), train, held)  # scored here, where

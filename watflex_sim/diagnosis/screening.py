@@ -428,7 +428,6 @@ def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float]
         return values
     r0, fixed = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(others, runs[1:])]
     slots = [cand.slots[n] for n in others] + [amp, amp]
-    u = np.concatenate([u_rig, [cand.neutral[n] for n in others], [0.0, 0.0]])
     lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
 
     def estimate(columns: np.ndarray, r: np.ndarray, at: np.ndarray) -> tuple[float, np.ndarray]:
