@@ -256,7 +256,8 @@ def residual_variance(r: np.ndarray, p: int) -> float:
 
 
 def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prior_sd: list[float] | None = None,
-              replicates: list[np.ndarray] | None = None, prior_mean: list[float] | None = None) -> dict[int, tuple[float, float]]:
+              replicates: list[np.ndarray] | None = None, prior_mean: list[float] | None = None,
+              model_error: np.ndarray | None = None) -> dict[int, tuple[float, float]]:
     """95 % intervals (physical units, within the slots' bounds) of the slots, by slot index:
     covariance (J'J / s^2 + P)^-1 with s^2 the residual variance per degree of freedom times the
     serial-correlation inflation, and P the precision of a Gaussian prior of sd `prior_sd` (internal
@@ -278,7 +279,15 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
     and +-0.8 %). With `prior_mean` (internal units, the datasheet's values) the step is the one to the posterior's
     mode, the prior pulling each rig parameter back to its datasheet value as far as the data let it: a fit that
     parked a rig parameter at its tolerance bound in a valley it shares with an effect's parameter (a hub's inertia at
-    +3 % and a tip payload 1.6 % short, the truth at +0 % and 0.903 kg; seed 48) then reaches along that valley."""
+    +3 % and a tip payload 1.6 % short, the truth at +0 % and 0.903 kg; seed 48) then reaches along that valley.
+
+    `model_error`: how far the model's residual is from a more exact model's at the same parameters (in r's units;
+    uncertainty.discretisation_error). Such an error biases a least-squares estimate by b = -cov J' e / s^2, in a
+    direction the linearisation gets wrong (seed 41: a quarter of a payload's bias, the wrong sign for a Coulomb
+    friction), but never by more than |b_i| <= sd_i |P e| / s (Cauchy-Schwarz; P e: the part of e the parameters'
+    columns can absorb, the rest no fit can follow). The interval reaches that bound beyond the noise's: on the
+    Watflex, where |P e| / s is 180-320 (e: twice what a 2 x finer model changes), that is 180-320 sd, against
+    estimates off by 10-270 sd on recordings of a 3 x finer model (seeds 51-53, docs/diagnosis.md)."""
     n, p = r.size, len(free)
     if p == 0 or n <= p:
         return {}
@@ -291,6 +300,10 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
     pull = prior * (u - np.nan_to_num(np.array(prior_mean, float))) if prior_mean is not None else np.zeros(p)
     newton = (-np.linalg.pinv(J.T @ (weights[:, None] * J) + s2 * np.diag(prior)) @ (J.T @ (weights * r) + s2 * pull)
               if s2 > 0 else np.zeros(p))
+    reach_error = np.zeros(p)
+    if model_error is not None and s2 > 0:
+        absorbed = J @ np.linalg.lstsq(J, model_error, rcond=None)[0]
+        reach_error = np.sqrt(np.maximum(np.diag(cov), 0.0)) * float(np.linalg.norm(absorbed)) / math.sqrt(s2)
     shift, scatter = np.zeros(p), np.zeros(p)
     if replicates and len(replicates) >= 2 and s2 > 0:
         moves = np.array([cov @ (J.T @ e) / s2 for e in replicates])
@@ -301,7 +314,7 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
         if not np.any(J[:, i]) or not math.isfinite(sd):
             out[i] = (slot.low, slot.high)
             continue
-        half = max(1.96 * sd, T_REPLICATES * float(scatter[i]))
+        half = max(1.96 * sd, T_REPLICATES * float(scatter[i])) + float(reach_error[i])
         reach = (u[i], u[i] - shift[i], u[i] + newton[i])
         lo, hi = slot.to_value(min(reach) - half), slot.to_value(max(reach) + half)
         out[i] = (float(max(lo, slot.low)), float(min(hi, slot.high)))

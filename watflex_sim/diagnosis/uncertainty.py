@@ -4,8 +4,9 @@ Contract: `final_intervals(data, runner, model, sims)` returns effect index -> p
 every interval within the parameter's bounds. It joins what each source of error would move an estimate
 by: the data's noise (the Jacobian, widened for serial correlation and for the rig's noise fed back in
 closed loop: `fitting.intervals`), the split of the data (the estimate from the training half alone), our
-own discretisation (`finer_refit`) and a cost that stick-slip makes rough (`slice_reach`: the estimate
-is known only up to where the cost's smooth trend rises above its roughness). Knob-tied pairs (an
+own discretisation (`discretisation_error`, and `fitting.intervals`' bound on the bias it can cause) and a
+cost that stick-slip makes rough (`slice_reach`: the estimate is known only up to where the cost's smooth
+trend rises above its roughness). Knob-tied pairs (an
 effect's ratio and the rig parameter turning the same knob) share one Jacobian column, and the ratio's
 interval also spans the datasheet's split of their product (`nominal_split`).
 """
@@ -16,10 +17,9 @@ import math
 import numpy as np
 
 from ..effects import CATALOGUE
-from ..engine import SimulationError
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
-from .fitting import Slot, at_internal, intervals, jacobian, levenberg, residual_variance, rig_slots, value_of
+from .fitting import Slot, at_internal, intervals, jacobian, residual_variance, rig_slots, value_of
 from .runner import Runner, evaluator, in_units
 from .screening import effect_slots_of
 from .tolerance import knob_partner
@@ -27,8 +27,7 @@ from .tolerance import knob_partner
 SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
 FINER = 2  # the discretisation error is judged against this many times the segments and a step this much finer
 NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
-FINER_ITERATIONS = 4  # Levenberg-Marquardt steps of the refit on the finer model (finer_refit; 1 simulation each)
-DISCRETISATION_REACH = 2.0  # x how far the finer refit moves an estimate: the interval's reach towards a converged
+DISCRETISATION_REACH = 2.0  # x what a FINER x finer model changes in the residual: the error against a converged
 # model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
 REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
 SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
@@ -78,7 +77,8 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     interval describes. It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the
     training half alone (`trained`): on a rough (stick-slip) cost the fit's own scatter dominates; for
     unbiased estimates that distance is |N(0, sd)| of the all-data estimate, and SPLIT_WIDTH = 4 covers
-    84 % from that one sample (2/pi atan 4)."""
+    84 % from that one sample (2/pi atan 4). And it reaches as far as our own discretisation can bias the
+    estimate (`discretisation_error`)."""
     out: dict[int, dict] = {}
     for i, effect in enumerate(model.effects):
         for p in CATALOGUE[effect["effect"]][1]:
@@ -97,8 +97,9 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     prior = [tolerance_sd(s) for s in slots]
     noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
     replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
-    fine = finer_refit(data, runner, model, slots, J, per)
+    error = discretisation_error(data, runner, model, r, per)
     centre = [tolerance_centre(s) for s in slots]
+    biased = intervals(slots, model, J, r, prior, replicates, centre, error)
     for k, (low, high) in intervals(slots, model, J, r, prior, replicates, centre).items():
         slot = slots[k]
         if slot.where[0] == "effect":
@@ -107,10 +108,11 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
                 reach = SPLIT_WIDTH * abs(value - slot.to_internal(value_of(trained, slot)))
                 low = min(low, max(slot.to_value(value - reach), slot.low))
                 high = max(high, min(slot.to_value(value + reach), slot.high))
-            if fine is not None:
-                far = slot.to_value(value + DISCRETISATION_REACH * (slot.to_internal(value_of(fine, slot)) - value))
-                low, high = min(low, max(far, slot.low)), max(high, min(far, slot.high))
+            # the slice probes at multiples of the data's own interval: the discretisation's reach joins after it
+            # (probed 8 x that far, a cost's curvature reads as roughness: seed 53's laser backlash, 3 % off, got
+            # [1.4e-7, 1.4e-4] rad)
             low, high = slice_reach(evaluate, model, slots, k, r, low, high)
+            low, high = min(low, biased[k][0]), max(high, biased[k][1])
             low, high = nominal_split(data, model, slot, low, high)
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
     return out
@@ -166,28 +168,14 @@ def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray
     return slot.to_value(min([a] + kept)), slot.to_value(max([b] + kept))
 
 
-def finer_refit(data: Data, runner: Runner, model: Model, slots: list[Slot], J: np.ndarray, per: np.ndarray) -> Model | None:
-    """`model`'s parameters refit on all the data with the model simulated FINER x finer (segments, step),
-    from `model` with its Jacobian J (final_intervals' units: per), FINER_ITERATIONS steps; None when the
-    rig has no discretisation to refine or the finer model diverges. How far the estimates move is what our
-    own discretisation costs them: data from a finer simulator or a continuum (a real rig) pulls them that
-    way, which no amount of data averages away. A linearised pull, J's least-squares answer to the finer
-    model's residual change, predicted a quarter of it (seed 41, a Watflex payload 0.5107 kg for 0.5006: pull
-    0.0023 kg; this refit moves it to 0.5067) and the wrong sign for an elbow Coulomb friction, whose valley
-    against the rig's friction scale this refit does not leave either (0.505 -> 0.508 N m for 0.537)."""
+def discretisation_error(data: Data, runner: Runner, model: Model, r: np.ndarray, per: np.ndarray) -> np.ndarray | None:
+    """What our own discretisation leaves in the residual `r` of `model` (final_intervals' units: per): DISCRETISATION_REACH
+    x the change the model simulated FINER x finer (segments, step) makes at the same parameters; None when the rig
+    has no discretisation to refine or the finer model diverges. Data from a finer simulator or a continuum (a real
+    rig) differ from ours by about that, which no amount of data averages away; `fitting.intervals` bounds the bias it
+    can cause. It replaced a refit on the finer model (4 Levenberg-Marquardt steps), whose move stopped short in
+    valleys (seed 51: an elbow Coulomb friction 7 % low, traded against the rig's friction scale, interval +-0.7 %)."""
     if not any(data.discretisation):
         return None
-
-    def finer(models):
-        out = []
-        for m in models:
-            sims = runner.simulate(m, finer=FINER)
-            out.append(None if sims is None else residual_vector(data, sims, "all") / per)
-        return out
-    start = finer([model])[0]
-    if start is None:
-        return None
-    try:
-        return levenberg(finer, model, slots, [value_of(model, s) for s in slots], J, FINER_ITERATIONS, start)[0]
-    except SimulationError:
-        return None
+    sims = runner.simulate(model, finer=FINER)
+    return None if sims is None else DISCRETISATION_REACH * (residual_vector(data, sims, "all") / per - r)
