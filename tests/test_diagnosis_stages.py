@@ -725,3 +725,36 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     assert abs(found["amplitude"] - truth["amplitude"]) < 0.1 * truth["amplitude"]
     assert abs(found["phase"] - truth["phase"]) < 0.2  # rad
     assert cost(evaluate([cand.model(Model(), found)])[0]) < 0.1 * cost(evaluate([cand.model(Model(), start)])[0])
+
+
+def test_a_difference_over_a_cliff_is_taken_from_the_gentler_side():
+    """uncertainty.gentler_side(): a one-sided difference that steps over a cliff of the cost (seed 54: a Watflex
+    dwell-time stiction whose gain +0.15 left the elbow stuck, |dr| 2.3e5 noise units against 390 for -0.15; its 95 %
+    interval was +-0.002 around 1.53, the truth 0.60) is replaced by the other side's. Stand-in: the residual, 1,000
+    white elements of unit sd, grows as 3 (g - 1.5) below g = 1.6 and jumps by 100 per element above it (and
+    with a second parameter k along a ramp). Forward
+    (the Jacobian's step, 0.05 x the 0-3 span = 0.15) the column is ~100 / 0.15 per element and the interval from
+    `fitting.intervals` +-0.0002; from the gentler side the column is 3 per element, the interval at least 1.96 x 1 /
+    (3 sqrt 1000) = +-0.021 and at most 1.6 x that (0.029: `intervals` also reaches the Gauss-Newton step to this
+    noise's own least-squares minimum). A parameter whose residual has no cliff keeps its forward column."""
+    from watflex_sim.diagnosis.fitting import Slot, intervals, jacobian
+    from watflex_sim.diagnosis.uncertainty import gentler_side
+
+    noise = np.random.default_rng(1).standard_normal(1000)
+    noise *= np.sqrt(1000) / np.linalg.norm(noise)
+    ramp = np.linspace(-1.0, 1.0, 1000)  # k's column: orthogonal to the gain's
+
+    def residual(g, k):
+        return noise + 3.0 * (g - 1.5) + (100.0 if g > 1.6 else 0.0) + 2.0 * (k - 1.0) * ramp
+    slots = [Slot(("effect", 0, "gain"), 0.0, 3.0), Slot(("effect", 0, "k"), 0.0, 3.0)]
+    model = Model([{"effect": "test", "where": "here", "gain": 1.5, "k": 1.0}])
+    evaluate = lambda models: [residual(m.effects[0]["gain"], m.effects[0]["k"]) for m in models]  # noqa: E731
+    u, r = np.array([1.5, 1.0]), residual(1.5, 1.0)
+    forward = jacobian(evaluate, model, slots, u, r)
+    gentle = gentler_side(evaluate, model, slots, u, r, forward, 2)
+    assert np.linalg.norm(forward[:, 0]) > 100 * np.linalg.norm(gentle[:, 0])
+    assert np.allclose(gentle[:, 0], 3.0) and np.array_equal(gentle[:, 1], forward[:, 1])
+    narrow, wide = intervals(slots, model, forward, r)[0], intervals(slots, model, gentle, r)[0]
+    assert narrow[1] - narrow[0] < 0.001
+    white = 1.96 / (3 * np.sqrt(1000))  # the white-noise half-width from the gentle column
+    assert white <= (wide[1] - wide[0]) / 2 <= 1.6 * white

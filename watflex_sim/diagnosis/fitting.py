@@ -101,7 +101,7 @@ def rig_slots(data: Data) -> list[Slot]:
             if n not in data.idle]
 
 
-def _fd_step(slot: Slot, u: float) -> float:
+def fd_step(slot: Slot, u: float) -> float:
     """Finite-difference step in internal units: large enough to see through stick-slip."""
     h = 0.1 if slot.log else 0.05 * slot.span()
     hi = slot.to_internal(slot.high)
@@ -116,7 +116,7 @@ def jacobian(evaluate, base: Model, free: list[Slot], u: np.ndarray, r: np.ndarr
     todo = [i for i in range(len(free)) if i not in known]
     steps, models = {}, []
     for i in todo:
-        steps[i] = _fd_step(free[i], u[i])
+        steps[i] = fd_step(free[i], u[i])
         v = np.array(u, float)
         v[i] += steps[i]
         models.append(at_internal(v, free, base))

@@ -1,14 +1,14 @@
 """Uncertainty: 95 % intervals of the final model's parameters, in physical units.
 
 Contract: `final_intervals(data, runner, model, sims)` returns effect index -> parameter -> (low, high),
-every interval within the parameter's bounds. It joins what each source of error would move an estimate
-by: the data's noise (the Jacobian, widened for serial correlation and for the rig's noise fed back in
-closed loop: `fitting.intervals`), the split of the data (the estimate from the training half alone), our
-own discretisation (`discretisation_error`, and `fitting.intervals`' bound on the bias it can cause) and a
-cost that stick-slip makes rough (`slice_reach`: the estimate is known only up to where the cost's smooth
-trend rises above its roughness). Knob-tied pairs (an
-effect's ratio and the rig parameter turning the same knob) share one Jacobian column, and the ratio's
-interval also spans the datasheet's split of their product (`nominal_split`).
+every interval within the parameter's bounds. It joins what each source of error would move an estimate by: the
+data's noise (the Jacobian, each effect parameter's column from the gentler side of a cliff, widened for serial
+correlation and for the rig's noise fed back in closed loop: `fitting.intervals`), the split of the data (the
+estimate from the training half alone), our own discretisation (`discretisation_error`, and `fitting.intervals`'
+bound on the bias it can cause) and a cost that stick-slip makes rough (`slice_reach`: the estimate is known only
+up to where the cost's smooth trend rises above its roughness). Knob-tied pairs (an effect's ratio and the rig
+parameter turning the same knob) share one Jacobian column, and the ratio's interval also spans the datasheet's
+split of their product (`nominal_split`).
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
-from .fitting import Slot, at_internal, intervals, jacobian, residual_variance, rig_slots, value_of
+from .fitting import Slot, at_internal, fd_step, intervals, jacobian, residual_variance, rig_slots, value_of
 from .runner import Runner, evaluator, in_units
 from .screening import effect_slots_of
 from .tolerance import knob_partner
@@ -70,7 +70,8 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     alone is fixed by the data: finite differences of unequal steps (10 % for a log-scaled ratio, 0.5 % for a
     +-5 % tolerance) made the two look separable (seed 6: a link stiffness 4.8 % off with an interval of
     +-0.05 %, the EI at its bound).
-    The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
+    Each effect parameter's column is the gentler of a step either way (`gentler_side`: one over a cliff of the
+    cost claims a false precision). The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
     the final model's simulations, where larger), and REPLICATES simulations of the
     final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
     which way (`fitting.intervals`): in closed loop, noise fed back moves the rig, which no white-noise
@@ -86,14 +87,16 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
                 out.setdefault(i, {})[p.name] = (effect[p.name] - p.quantum / 2, effect[p.name] + p.quantum / 2)
     if not model.effects:
         return out
-    slots = effect_slots_of(data, model) + rig_slots(data)
+    effect_slots = effect_slots_of(data, model)
+    slots = effect_slots + rig_slots(data)
     per = unit_change(data, "all", sims=sims)  # the units final_refit fits in
     evaluate = in_units(evaluator(runner, "all"), per)
     r = evaluate([model])[0]
     if r is None:
         return out
     u = np.array([s.to_internal(value_of(model, s)) for s in slots])
-    J = tie_knob_columns(data, model, slots, jacobian(evaluate, model, slots, u, r))
+    J = gentler_side(evaluate, model, slots, u, r, jacobian(evaluate, model, slots, u, r), len(effect_slots))
+    J = tie_knob_columns(data, model, slots, J)
     prior = [tolerance_sd(s) for s in slots]
     noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
     replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
@@ -116,6 +119,30 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
             low, high = nominal_split(data, model, slot, low, high)
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
     return out
+
+
+def gentler_side(evaluate, model: Model, slots: list[Slot], u: np.ndarray, r: np.ndarray, J: np.ndarray, n: int) -> np.ndarray:
+    """J with each of the first `n` columns (the effects' parameters) taken by a step the other way where that
+    changes the residual less: a one-sided difference that steps over a cliff of the cost (a break-away the command
+    no longer overcomes: the joint stays stuck) claims the parameter is known to the width of that cliff's foot.
+    Seed 54, a Watflex dwell-time stiction found at gain 1.53, time constant 1.61 s (truth 0.60, 0.39 s): +0.15 of
+    gain changed the residual by |dr| = 2.3e5 noise units against 390 for -0.15, and the gain's interval was +-0.002.
+    The gentler side bounds how far the estimate can move with the cost within the noise on at least that side."""
+    if n == 0:
+        return J
+    J, back = J.copy(), []
+    for i in range(n):
+        v = np.array(u, float)
+        low, high = sorted((slots[i].to_internal(slots[i].low), slots[i].to_internal(slots[i].high)))
+        v[i] = np.clip(u[i] - fd_step(slots[i], u[i]), low, high)
+        back.append(v)
+    runs = evaluate([at_internal(v, slots, model) for v in back])
+    for i, (v, rv) in enumerate(zip(back, runs)):
+        if rv is not None and v[i] != u[i]:
+            column = (rv - r) / (v[i] - u[i])
+            if np.linalg.norm(column) < np.linalg.norm(J[:, i]):
+                J[:, i] = column
+    return J
 
 
 def nominal_split(data: Data, model: Model, slot: Slot, low: float, high: float) -> tuple[float, float]:
