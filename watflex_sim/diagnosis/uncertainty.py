@@ -71,8 +71,8 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     +-5 % tolerance) made the two look separable (seed 6: a link stiffness 4.8 % off with an interval of
     +-0.05 %, the EI at its bound).
     Each effect parameter's column is the gentler of a step either way (`gentler_side`: one over a cliff of the
-    cost claims a false precision). The Jacobian and the residual are in final_refit's units (a channel's noise, or its misfit in `sims`,
-    the final model's simulations, where larger), and REPLICATES simulations of the
+    cost claims a false precision). The Jacobian and the residual are in final_refit's units (a channel's noise,
+    or its misfit in `sims`, the final model's simulations, where larger), and REPLICATES simulations of the
     final model with the rig's noise on (other seeds) show how far that noise moves the estimate and
     which way (`fitting.intervals`): in closed loop, noise fed back moves the rig, which no white-noise
     interval describes. It is widened to SPLIT_WIDTH x the distance to the same parameter fitted on the
@@ -133,8 +133,7 @@ def gentler_side(evaluate, model: Model, slots: list[Slot], u: np.ndarray, r: np
     J, back = J.copy(), []
     for i in range(n):
         v = np.array(u, float)
-        low, high = sorted((slots[i].to_internal(slots[i].low), slots[i].to_internal(slots[i].high)))
-        v[i] = np.clip(u[i] - fd_step(slots[i], u[i]), low, high)
+        v[i] = np.clip(u[i] - fd_step(slots[i], u[i]), slots[i].to_internal(slots[i].low), slots[i].to_internal(slots[i].high))
         back.append(v)
     runs = evaluate([at_internal(v, slots, model) for v in back])
     for i, (v, rv) in enumerate(zip(back, runs)):
