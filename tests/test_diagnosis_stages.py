@@ -663,6 +663,31 @@ def test_a_slice_leaves_a_smooth_minimum_alone_and_reaches_past_a_rough_one():
     assert low == pytest.approx(4.6) and high == pytest.approx(5.4)
 
 
+def test_a_slice_follows_a_valley_where_the_others_can_move():
+    """slice_reach() with the Jacobian: the cost along a slot is profiled, the other slots re-optimised to first order.
+    Stand-in: x and y (bounds 0-10) on a valley y = x, r = 1e4 (y - x) w1 + 39.3 (x - 5) w2 + e (w1, w2 unit and
+    orthogonal to each other and to the 1,000 white elements e), estimate (5, 5), interval given [4.99, 5.01]. Held at
+    y = 5, a probe 0.01 off costs 0.5 (1e4 x 0.01)^2 = 5,000 more: the slice adds nothing. With y following x the
+    cost rises by 0.5 x 39.3^2 d^2 only, within the threshold 1.96^2 / 2 s^2 = 1.93 (s^2 ~ 1000 / 998) up to
+    d = 0.050: the probes at +-0.04 join, +-0.08 (4.9 more) do not (the profile likelihood's own 95 % interval)."""
+    from watflex_sim.diagnosis.fitting import Slot
+    from watflex_sim.diagnosis.uncertainty import slice_reach
+
+    rng = np.random.default_rng(1)
+    e = rng.standard_normal(1000)
+    w1, w2 = np.linalg.qr(np.column_stack([e, rng.standard_normal(1000), rng.standard_normal(1000)]))[0][:, 1:].T
+
+    def residual(x, y):
+        return 1e4 * (y - x) * w1 + 39.3 * (x - 5.0) * w2 + e
+    slots = [Slot(("effect", 0, "x"), 0.0, 10.0), Slot(("effect", 0, "y"), 0.0, 10.0)]
+    model = Model([{"effect": "test", "where": "here", "x": 5.0, "y": 5.0}])
+    evaluate = lambda models: [residual(m.effects[0]["x"], m.effects[0]["y"]) for m in models]  # noqa: E731
+    J = np.column_stack([-1e4 * w1 + 39.3 * w2, 1e4 * w1])  # d r / d x, d r / d y
+    r = residual(5.0, 5.0)
+    assert slice_reach(evaluate, model, slots, 0, r, 4.99, 5.01) == pytest.approx((4.99, 5.01))
+    assert slice_reach(evaluate, model, slots, 0, r, 4.99, 5.01, J) == pytest.approx((4.96, 5.04))
+
+
 def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     """effects.canonical / pipeline._canonical: a sin(2 pi q / P + phase) = (-a) sin(2 pi q / P + phase +- pi), so a
     fit may land on either; the report gives a >= 0 with the phase in (-pi, pi], intervals moved with them. Seed 47,

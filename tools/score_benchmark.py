@@ -14,7 +14,8 @@ in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-o
   coverage (share of true parameter values inside the finding's interval), the verdicts, how often
   an experiment was proposed and, where one was, whether running it on the case's truth and
   diagnosing again named the true effect with no alternative left, median validation NRMSE ratio
-  after/before, time per case; for cases with two effects (make_benchmark --pairs, kept out of the
+  after/before, time per case (also scaled to the reference machine by this machine's bare `mj_step`,
+  measured first); for cases with two effects (make_benchmark --pairs, kept out of the
   top-1 figure): whether the first finding is one of them and whether both, and nothing else, are found.
 
 Parameter error of a finding that names the right effect: for each true parameter,
@@ -36,6 +37,9 @@ import sys
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
+
+REFERENCE_STEP_US = 3.0  # µs: bare mj_step of the laser arm at rest on the machine the times in docs/diagnosis.md and
+# docs/speed.md were measured on until 2026-11-26 (docs/speed.md: 2.99-3.07 µs); times per case are also given scaled to it
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -147,6 +151,24 @@ def _pct(hits: int, total: int) -> str:
     return f"{100 * hits / total:.0f} % ({hits}/{total})" if total else "-"
 
 
+def machine_step_us() -> float:
+    """This machine's speed: bare `mj_step` of the laser arm at rest, µs per step (best of 3 x 20,000 steps)."""
+    from bench import initial_state, load, time_bare
+
+    model, start, _ = initial_state(load("laser_arm_step", None))
+    return min(time_bare(model, start, 20_000, 1_000)[0] for _ in range(3)) / 20_000 * 1e6
+
+
+def _scaled(rows: list[dict], times: list[float]) -> str:
+    """Median / max time per case scaled to REFERENCE_STEP_US, with this machine's step; '-' if not measured."""
+    steps = [r["machine_step_us"] for r in rows if r.get("machine_step_us")]
+    if not times or not steps:
+        return "-"
+    ratio = REFERENCE_STEP_US / statistics.median(steps)
+    return (f"{statistics.median(times) * ratio:.0f} / {max(times) * ratio:.0f} (bare step {statistics.median(steps):.2f} µs here, "
+            f"{REFERENCE_STEP_US} µs there)")
+
+
 def summary(rows: list[dict], baselines: bool) -> str:
     """The markdown tables: per case, confusion, and the summary figures."""
     lines = ["| case | concealment | truth | ours | " + ("refit-only | SINDy | " if baselines else "")
@@ -195,6 +217,7 @@ def summary(rows: list[dict], baselines: bool) -> str:
         ("median parameter error, right effect (target <= 15 %)", f"{100 * statistics.median(errors):.1f} % (n={len(errors)})" if errors else "-"),
         ("median held-out NRMSE after / before", f"{statistics.median(ratios):.3f}" if ratios else "-"),
         ("time per case: median / max (s)", f"{statistics.median(times):.0f} / {max(times):.0f}" if times else "-"),
+        ("time per case scaled to the reference machine by bare `mj_step` speed: median / max (s)", _scaled(rows, times)),
     ]
     if baselines:
         figures += [
@@ -241,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     cases.sort(key=lambda c: c["id"].rsplit("-", 1)[-1])  # by the opaque hash: rigs and kinds interleaved,
     # so a run stopped early has scored a fair sample (score.json is rewritten after every case)
     rows = []
+    step_us = machine_step_us()
     start = time.perf_counter()
     for i, case in enumerate(cases, 1):
         try:
@@ -248,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         except ConfigError as exc:
             print(f"error: case {case['id']}: {exc}", file=sys.stderr)
             return 2
-        rows.append(row)
+        rows.append({**row, "machine_step_us": step_us})
         (args.bench / "score.json").write_text(json.dumps(rows, indent=1, default=float) + "\n")
         elapsed = time.perf_counter() - start
         print(f"[{i}/{len(cases)}] {case['id']}: truth {row['truth']}, ours {row['ours']} ({row['verdict']})"

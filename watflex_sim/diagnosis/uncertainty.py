@@ -5,8 +5,9 @@ every interval within the parameter's bounds. It joins what each source of error
 data's noise (the Jacobian, each effect parameter's column from the gentler side of a cliff, widened for serial
 correlation and for the rig's noise fed back in closed loop: `fitting.intervals`), the split of the data (the
 estimate from the training half alone), our own discretisation (`discretisation_error`, and `fitting.intervals`'
-bound on the bias it can cause) and a cost that stick-slip makes rough (`slice_reach`: the estimate is known only
-up to where the cost's smooth trend rises above its roughness). Knob-tied pairs (an effect's ratio and the rig
+bound on the bias it can cause) and a cost that stick-slip makes rough or a valley bends (`slice_reach`, a linearised
+profile: the estimate is known only up to where the cost's smooth trend, the other parameters following, rises above
+its roughness). Knob-tied pairs (an effect's ratio and the rig
 parameter turning the same knob) share one Jacobian column, and the ratio's interval also spans the datasheet's
 split of their product (`nominal_split`).
 """
@@ -19,7 +20,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
-from .fitting import Slot, at_internal, fd_step, intervals, jacobian, residual_variance, rig_slots, value_of
+from .fitting import Slot, at_internal, fd_step, intervals, jacobian, refit_cost, residual_variance, rig_slots, value_of
 from .runner import Runner, evaluator, in_units
 from .screening import effect_slots_of
 from .tolerance import knob_partner
@@ -114,7 +115,7 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
             # the slice probes at multiples of the data's own interval: the discretisation's reach joins after it
             # (probed 8 x that far, a cost's curvature reads as roughness: seed 53's laser backlash, 3 % off, got
             # [1.4e-7, 1.4e-4] rad)
-            low, high = slice_reach(evaluate, model, slots, k, r, low, high)
+            low, high = slice_reach(evaluate, model, slots, k, r, low, high, J)
             low, high = min(low, biased[k][0]), max(high, biased[k][1])
             low, high = nominal_split(data, model, slot, low, high)
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
@@ -158,20 +159,34 @@ def nominal_split(data: Data, model: Model, slot: Slot, low: float, high: float)
     return max(min(low, low * e), slot.low), min(max(high, high * e), slot.high)
 
 
-def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray, low: float, high: float) -> tuple[float, float]:
-    """Interval (low, high) of slot i widened to every probe of the cost along that slot alone, SLICE_STEPS x
-    the interval's half-width on each side (others held), whose cost 0.5 |r|^2 is within a threshold of the
-    lowest seen: 1.96^2 / 2 x s^2 (`residual_variance`: what the data's noise resolves), or, where more, 1.96 x
-    the cost's roughness, the RMS departure of the inner probes from a parabola. On a smooth cost with the
-    estimate at its minimum this adds nothing (the slice is narrower than the Jacobian's interval, which
-    counts the trade-offs with the other parameters); where stick-slip makes the cost rough, a minimum is
-    known only to where the smooth trend rises above the jumps, and a probe that beats the estimate
-    shows the fit stopped short (seed 47, structural damping of link 2 at x14.516, interval [14.513, 14.522]:
-    the cost at 14.49 is 51 lower, with jumps of +-400 between probes 0.01 apart; the truth is 14.48).
+def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray, low: float, high: float,
+                J: np.ndarray | None = None) -> tuple[float, float]:
+    """Interval (low, high) of slot i widened to every probe along that slot, SLICE_STEPS x the interval's
+    half-width on each side, whose profiled cost is within a threshold of the lowest seen: 1.96^2 / 2 x s^2
+    (`residual_variance`: what the data's noise resolves), or, where more, 1.96 x the cost's roughness, the
+    RMS departure of the inner probes from a parabola. The profiled cost is 0.5 |r|^2 with every other slot
+    re-optimised to first order within its bounds (`refit_cost` on J's other columns, J in r's units; without
+    J the others are held): a profile likelihood, linearised. On a smooth cost with the estimate at its
+    minimum it adds nothing to the Jacobian's interval; where stick-slip makes the cost rough, a minimum is
+    known only to where the smooth trend rises above the jumps, and a probe that beats the estimate shows
+    the fit stopped short (seed 47, structural damping of link 2 at x14.516, interval [14.513, 14.522]: the
+    cost at 14.49 is 51 lower, with jumps of +-400 between probes 0.01 apart; the truth is 14.48). Along a
+    valley the others follow the probe, where a slice with them held climbs its wall at once: a bend the
+    linear interval cuts short is reached, and the wall's climb is not taken for roughness (seed 55, a Watflex
+    presliding's sigma1: [5.0, 19.3] N m s/rad held, [7.0, 13.8] profiled; truth 11.9).
     `r`: the residual of `model` in `evaluate`'s units."""
     slot = slots[i]
     u = np.array([s.to_internal(value_of(model, s)) for s in slots])
-    bottom, top = slot.to_internal(slot.low), slot.to_internal(slot.high)
+    lo = np.array([s.to_internal(s.low) for s in slots])
+    hi = np.array([s.to_internal(s.high) for s in slots])
+    others = [j for j in range(len(slots)) if j != i]
+
+    def profiled(q: np.ndarray) -> float:
+        if J is None or not others:
+            return 0.5 * float(q @ q)
+        return 0.5 * refit_cost(J[:, others], q, u[others], lo[others], hi[others])
+
+    bottom, top = lo[i], hi[i]
     a, b = slot.to_internal(low), slot.to_internal(high)
     half = max(u[i] - a, b - u[i], 1e-4 * (top - bottom))
     points = sorted({float(np.clip(u[i] + sign * k * half, bottom, top)) for sign in (-1, 1) for k in SLICE_STEPS} - {float(u[i])})
@@ -180,8 +195,8 @@ def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray
         v = u.copy()
         v[i] = x
         probes.append(at_internal(v, slots, model))
-    costs = np.array([math.inf if q is None else 0.5 * float(q @ q) for q in evaluate(probes)])
-    cost0 = 0.5 * float(r @ r)
+    costs = np.array([math.inf if q is None else profiled(q) for q in evaluate(probes)])
+    cost0 = profiled(r)
     inner = [k for k, x in enumerate(points) if abs(x - u[i]) <= SLICE_STEPS[-2] * half * (1 + 1e-9) and math.isfinite(costs[k])]
     x = np.array([0.0] + [(points[k] - u[i]) / half for k in inner])
     c = np.array([cost0] + [costs[k] for k in inner])
