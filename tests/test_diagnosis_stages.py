@@ -9,7 +9,7 @@ from watflex_sim.diagnosis import Model, Slot, intervals, prepare
 from watflex_sim.diagnosis.data import measured_noise, split_blocks
 from watflex_sim.diagnosis.explain import direction, indistinct, physical_place, units_at
 from watflex_sim.diagnosis.fitting import huber_threshold
-from watflex_sim.diagnosis.pipeline import explained_share
+from watflex_sim.diagnosis.validate import explained_share
 from watflex_sim.diagnosis.tolerance import fold_within_tolerance
 from watflex_sim.model import load_model
 
@@ -226,7 +226,7 @@ def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
     """Issue 14's false all-clear: a motor-current error of 1.5 x its noise on one of four channels
     leaves the mean noise ratio near 1.1 (< 1.3) but must not pass as 'within noise'."""
     from watflex_sim.diagnosis.data import fit_scores
-    from watflex_sim.diagnosis.pipeline import within_noise
+    from watflex_sim.diagnosis.validate import within_noise
 
     data = prepare(laser_recordings, ["a", "b"])
     rng = np.random.default_rng(3)
@@ -342,13 +342,13 @@ def test_a_channel_further_off_than_its_noise_is_weighted_by_its_misfit():
 
 
 def test_the_refit_compass_goes_on_until_the_noise_resolves_no_step():
-    """The refit's pattern search in noise units (pipeline.COMPASS_SWEEPS, CHI2_RESOLUTION) from k 2 % off
+    """The refit's pattern search in noise units (refit.COMPASS_SWEEPS, CHI2_RESOLUTION) from k 2 % off
     (the nominal model) reaches the truth to 2e-5, the strain bridge within 1.01 x its noise; 6 sweeps (the
     search before) halve the step to 0.4 % of the tolerance and leave it at 3.0 x (on watflex-4cecc0b4:
     link2_EI 0.97947 against 0.9791, strain_2A 1.32 x; now 0.9791, nothing_missing)."""
     from watflex_sim.diagnosis.data import channel_ratios, residual_vector
     from watflex_sim.diagnosis.fitting import compass
-    from watflex_sim.diagnosis.pipeline import CHI2_RESOLUTION, COMPASS_SWEEPS
+    from watflex_sim.diagnosis.refit import CHI2_RESOLUTION, COMPASS_SWEEPS
 
     data, simulate_ = _camera_and_strain()
     evaluate = lambda models: [residual_vector(data, simulate_(m), unit="noise") for m in models]  # noqa: E731
@@ -380,7 +380,7 @@ def test_a_finding_is_told_from_no_effect_by_its_intervals():
 
 
 def test_a_finding_validation_cannot_do_without_is_not_dropped_for_its_intervals():
-    """pipeline.vague_findings: a finding whose intervals include 'no effect' is dropped only if validation without
+    """validate.vague_findings: a finding whose intervals include 'no effect' is dropped only if validation without
     it is not far worse - it removes less than EXPLAINED_SHARE (80 %) of the excess over the noise that validation
     has without it. Seed 46 (watflex-e35447b1): a spurious sensor gain x1.09 [0.968, 1.214], validation 7.17 x the
     noise with it, 8.27 x without (16 %): dropped. Seed 53 (watflex-d245fa05): an elbow ripple at a wrong period,
@@ -388,7 +388,7 @@ def test_a_finding_validation_cannot_do_without_is_not_dropped_for_its_intervals
     dropped and the case left `unexplained` with no finding). The rig data only matters for knob partners."""
     from types import SimpleNamespace
 
-    from watflex_sim.diagnosis.pipeline import vague_findings
+    from watflex_sim.diagnosis.validate import vague_findings
 
     data = SimpleNamespace(rig=SimpleNamespace(parameters={}))
     gain = {"effect": "sensor_gain", "where": "strain_2B", "ratio": 1.0909}
@@ -409,7 +409,7 @@ def test_elimination_drops_a_finding_that_validation_does_not_need(monkeypatch):
     (validation 23.45x the noise without it) and a viscous friction after it (1.276x with it, 1.26x
     without: 1.264 here) - the viscous one was kept by a test of the wrong sign (dropped only if its
     removal *improved* validation by 1 %). Validation noise ratios here are set per set of effects."""
-    from watflex_sim.diagnosis import pipeline
+    from watflex_sim.diagnosis import validate
 
     ratio = {("delay", "viscous_friction"): 1.276, ("delay",): 1.264, ("viscous_friction",): 23.45, (): 23.5}
 
@@ -417,14 +417,14 @@ def test_elimination_drops_a_finding_that_validation_does_not_need(monkeypatch):
         def simulate(self, model):
             return tuple(e["effect"] for e in model.effects)  # stands for the model's simulations
 
-    monkeypatch.setattr(pipeline, "fit_scores", lambda data, sims, part: {"noise_ratio": ratio[sims], "nrmse": ratio[sims] / 100})
+    monkeypatch.setattr(validate, "fit_scores", lambda data, sims, part: {"noise_ratio": ratio[sims], "nrmse": ratio[sims] / 100})
     both = Model([{"effect": "delay", "where": "command", "seconds": 0.011},
                   {"effect": "viscous_friction", "where": "elbow", "coefficient": -1e-3, "coefficient_negative": -3e-3}])
-    model, sims, without = pipeline.eliminate(None, Runner(), both, ("delay", "viscous_friction"), lambda *a: None)
+    model, sims, without = validate.eliminate(None, Runner(), both, ("delay", "viscous_friction"), lambda *a: None)
     assert sims == ("delay",) and [e["effect"] for e in model.effects] == ["delay"]
     assert [w["noise_ratio"] for w in without] == [23.5]  # what validation would be without the delay
     ratio[("delay",)] = 1.276 * 1.02  # now the viscous friction is worth 2 %: kept
-    model, sims, without = pipeline.eliminate(None, Runner(), both, ("delay", "viscous_friction"), lambda *a: None)
+    model, sims, without = validate.eliminate(None, Runner(), both, ("delay", "viscous_friction"), lambda *a: None)
     assert len(model.effects) == 2 and [w["noise_ratio"] for w in without] == [23.45, pytest.approx(1.30152)]
 
 
@@ -436,7 +436,7 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %).
     nominal_split() joins it with the same interval moved to the datasheet's split (gain 1.00)."""
     from watflex_sim.diagnosis.uncertainty import tie_knob_columns, tolerance_sd
-    from watflex_sim.diagnosis.screening import effect_slots_of
+    from watflex_sim.diagnosis.effect_fit import effect_slots_of
     from watflex_sim.diagnosis.fitting import rig_slots
 
     data = prepare(laser_recordings, ["a", "b"])
@@ -470,7 +470,7 @@ def test_a_later_finding_must_remove_the_excess_that_asked_for_it():
     0.09 % elbow-encoder gain that takes the mean 1.023 -> 0.941 and strain_2A 1.359 -> 1.336 removes
     6 % (< MIN_EXCESS_GAIN 25 %), not the 356 % the mean would say. Validation within the margin
     everywhere: nothing (0)."""
-    from watflex_sim.diagnosis.pipeline import MIN_EXCESS_GAIN, excess_gain
+    from watflex_sim.diagnosis.validate import MIN_EXCESS_GAIN, excess_gain
 
     def held(mean, worst=1.0, channel="strain_2A", **others):
         return {"noise_ratio": mean, "worst_channel": channel, "worst_ratio": worst, "channel_ratios": {channel: worst, **others}}
@@ -486,7 +486,7 @@ def test_the_refit_compass_runs_only_near_the_noise():
     """compass_worth(): the refit's pattern search is for a refit short of the noise on some channel
     (a clean Watflex case at 2.2 x), not for one far off (a 0.33 kg payload left the refit at 11.7 x:
     the search only pushed the elbow inertia to its bound), nor for one already within the margin."""
-    from watflex_sim.diagnosis.pipeline import COMPASS_REACH, NOISE_MARGIN, compass_worth
+    from watflex_sim.diagnosis.refit import COMPASS_REACH, NOISE_MARGIN, compass_worth
 
     assert compass_worth({"noise_ratio": 2.2, "worst_ratio": 3.0})
     assert compass_worth({"noise_ratio": 1.1, "worst_ratio": 1.5})
@@ -605,7 +605,7 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
     from watflex_sim.diagnosis.fitting import levenberg, value_of
     from watflex_sim.diagnosis.runner import Runner, evaluator, in_units
-    from watflex_sim.diagnosis.screening import effect_slots_of
+    from watflex_sim.diagnosis.effect_fit import effect_slots_of
 
     truth = 0.4  # kg
     recs = []
@@ -722,7 +722,8 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     from the screening's start (period 1.63 rad, a spring absorbing part of the ripple) must land within the ladder's
     spacing of the true 0.77 rad (neighbouring periods drift at most half a cycle apart over the range; the rung
     nearest 0.77 is 0.761, 1 % off) with amplitude and phase near the truth, and cost a tenth of the start's."""
-    from watflex_sim.diagnosis.screening import Candidate, period_ladder, scan_period
+    from watflex_sim.diagnosis.effect_fit import period_ladder, scan_period
+    from watflex_sim.diagnosis.screening import Candidate
 
     motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
 

@@ -7,7 +7,6 @@ Expected numbers are worked out by hand in each test from the definitions in rig
 import math
 
 import mujoco
-import numpy as np
 import pytest
 
 from watflex_sim.controllers import CONTROLLERS

@@ -5,7 +5,6 @@ basta/quanser-2-dof-serial-flexible-link @ 48ab0ce, MIT; see LICENSE and SOURCE.
 Reference figures: ABOUT.md of ../shared/realdata/quanser_2dsfl (the published gains reproduce
 the fsf current command within 2-3 %; hub 2 stops 0.8-1.2 deg short of its +-10 deg target).
 """
-import json
 import math
 import shutil
 import tomllib

@@ -41,7 +41,6 @@ import numpy as np  # noqa: E402
 
 from watflex_sim import engine  # noqa: E402
 from watflex_sim.build import BUILDERS  # noqa: E402
-from watflex_sim.model import load_model  # noqa: E402
 from watflex_sim.params import CONTROL_PERIOD, RIGS  # noqa: E402
 from watflex_sim.scenario import available, load_scenario  # noqa: E402
 

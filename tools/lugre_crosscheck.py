@@ -186,7 +186,7 @@ def reference(friction: JointFriction, torque, kinks: list[float], samples: np.n
     """
     from scipy.integrate import solve_ivp
 
-    p, s0, s1 = friction.positive, friction.sigma0, friction.sigma1
+    s0, s1 = friction.sigma0, friction.sigma1
 
     def rhs(time, y):
         q, v, z = y

@@ -4,22 +4,27 @@ One module per stage, each with its contract in its docstring:
   data        recordings in a canonical order, channels, spreads, noise, the train/validation blocks
   runner      re-simulation jobs in worker processes
   fitting     Levenberg-Marquardt on bounded slots, 95 % intervals
-  screening   candidate effects, their signatures, screening and candidate fits
+  refit       the nominal model re-simulated, the rig's parameters refit, what noise and discretisation leave
+  screening   candidate effects, their signatures, the screening and the shortlist
+  effect_fit  the fit of one candidate effect (a quantised step's search, a ripple's period scan)
+  validate    whether a finding earns its place on validation data; backward elimination; the verdict
   refine      the chosen candidate's polish and the other forms of the same finding
   tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
   uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost)
   locate      where the residual stands out of the noise, in which regime
   explain     findings in the rig's physical terms
   experiment  the experiment that would separate explanations the data cannot
-  pipeline    the stages in order, the verdict and the report
+  pipeline    the stages in order and the report
 """
 from .data import (Data, Model, fit_scores, motion_channel, noise_nrmse, noise_ratio, prepare, residual_vector,
                    scale_of)
+from .effect_fit import step_search
 from .fitting import Slot, intervals, levenberg, refit_parameters
 from .locate import locate
-from .pipeline import MIN_GAIN, MIN_HELD_GAIN, NOISE_MARGIN, diagnose
+from .pipeline import diagnose
 from .runner import simulate_all
-from .screening import Candidate, screen, shortlist, step_search
+from .screening import MIN_GAIN, Candidate, screen, shortlist
+from .validate import MIN_HELD_GAIN, NOISE_MARGIN
 
 __all__ = [
     "Candidate", "Data", "MIN_GAIN", "MIN_HELD_GAIN", "Model", "NOISE_MARGIN", "Slot", "diagnose", "fit_scores",

@@ -12,41 +12,29 @@ the refit nominal model is within NOISE_MARGIN x the noise on training AND valid
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from ..effects import canonical, canonical_moves
-from ..model import ConfigError
 from ..recording import Recording
-from ..resim import finer_discretisation, scenario_from_recording
-from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
-from .explain import finding, indistinct
-from .fitting import compass, jacobian, levenberg, rig_slots, value_of
+from .data import Data, Model, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
+from .effect_fit import FIT_ITERATIONS, fit_candidate, scored
+from .explain import finding
+from .fitting import value_of
 from .locate import locate
-from .refine import POLISH_ITERATIONS, alternative_entry, offset_alternative, polish, single_from_pair
-from .runner import Runner, evaluator, in_units
-from .screening import (FIT_ITERATIONS, MIN_GAIN, RESCREEN, SCREEN_TOP, candidates, effect_slots_of, fit_candidate,
-                        make_candidate, rescreen, screen, scored, shortlist, signatures)
-from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance, knob_partner
-from .uncertainty import FINER, NOISE_SEED, final_intervals
+from .refine import alternative_entry, offset_alternative, polish, single_from_pair
+from .refit import calibrate_noise, final_refit, refit_nominal
+from .runner import Runner, evaluator
+from .screening import RESCREEN, SCREEN_TOP, candidates, make_candidate, rescreen, screen, shortlist, signatures
+from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
+from .uncertainty import final_intervals
+from .validate import (NOISE_MARGIN, earns_place, eliminate, explained_share, gains, shortfall, vague_findings, verdict_of,
+                       verdict_reason, within_noise)
 
-MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
-NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
-MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
-EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
-REFIT_ITERATIONS = 8
-COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
-# per parameter each); it stops once no step changes the cost by CHI2_RESOLUTION (6 sweeps halved the steps to
-# 0.4 % of a tolerance at best: a clean Watflex case's strain bridge is 1.3 x its noise at link 2's EI 0.04 % off)
-COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise gets the pattern search; one further
-# off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
-# refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
-CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
 
 
 class Stages:
@@ -86,107 +74,11 @@ def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, ma
         return report
 
 
-def _gains(result: dict, train_now: dict, held_now: dict) -> dict:
-    """Relative falls of the training and validation noise ratios (from the fit_scores train_now and
-    held_now), the share of the excess on validation it removes (excess_gain) and the score that charges
-    every parameter."""
-    train_gain = (train_now["noise_ratio"] - result["train"]["noise_ratio"]) / train_now["noise_ratio"]
-    held_gain = (held_now["noise_ratio"] - result["held_out"]["noise_ratio"]) / held_now["noise_ratio"]
-    return {**result, "train_gain": train_gain, "held_gain": held_gain, "excess_gain": excess_gain(held_now, result["held_out"]),
-            "score": train_gain + held_gain - MIN_GAIN * result["n_params"]}
-
-
-def excess_gain(held_now: dict, held_new: dict) -> float:
-    """Share of what validation has above the noise that a model removes, on what made one more round
-    necessary: the mean noise ratio's excess over 1 where the mean is beyond NOISE_MARGIN, else the excess
-    of the channel beyond it (`worst_channel`), else 0 (validation is within the noise everywhere: a
-    round for training alone shows nothing on unseen data). Seed 5: with a 11 ms delay found, validation
-    at 1.00x the noise on the mean and strain_2A above the margin, a 0.03 % gain of the elbow encoder
-    lowered the mean to 0.96x - 'removing' 4e7 times the mean's excess (then 1e-9) - and strain_2A not at all."""
-    if held_now["noise_ratio"] > NOISE_MARGIN:
-        return (held_now["noise_ratio"] - held_new["noise_ratio"]) / (held_now["noise_ratio"] - 1.0)
-    if held_now["worst_ratio"] > NOISE_MARGIN:
-        channel, before = held_now["worst_channel"], held_now["worst_ratio"]
-        return (before - held_new["channel_ratios"].get(channel, math.inf)) / (before - 1.0)
-    return 0.0
-
-
-def _earns_place(result: dict, later: bool) -> bool:
-    """Whether a fitted candidate earns its place (_shortfall says nothing against it)."""
-    return not _shortfall(result, later)
-
-
-def _shortfall(result: dict, later: bool) -> str:
-    """Why a fitted candidate does not earn its place, in words, or "" if it does: training must be better
-    by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one is in already) must
-    also remove MIN_EXCESS_GAIN of what validation still has above the noise (excess_gain), so a second
-    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate)."""
-    if result["train_gain"] < MIN_GAIN * result["n_params"] or result["held_gain"] < MIN_HELD_GAIN:
-        return "less than its parameters' cost"
-    if later and result["excess_gain"] < MIN_EXCESS_GAIN:
-        return (f"removes only {100 * result['excess_gain']:.0f} % of what validation has above the noise where another "
-                f"round was asked for (a later finding must remove {100 * MIN_EXCESS_GAIN:.0f} %)")
-    return ""
-
-
-def explained_share(before: float, after: float) -> float:
-    """Share of the residual above the noise (noise ratio - 1) that a model removes."""
-    return (before - after) / max(before - 1.0, 1e-9) if before > 1.0 else 1.0
-
-
-def _within(scores: dict) -> bool:
-    """One part's fit_scores within NOISE_MARGIN x the noise, on average and on every channel."""
-    return scores["noise_ratio"] <= NOISE_MARGIN and scores["worst_ratio"] <= NOISE_MARGIN
-
-
-def compass_worth(train: dict) -> bool:
-    """Whether the refit's training scores ask for the pattern search: short of the noise on some channel,
-    but within COMPASS_REACH x the margin (further off, the rig's parameters would only absorb missing physics)."""
-    return not _within(train) and train["noise_ratio"] <= COMPASS_REACH * NOISE_MARGIN
-
-
-def within_noise(scores_train: dict, scores_held: dict) -> bool:
-    """Training and validation within NOISE_MARGIN x the noise, on average and on every channel."""
-    return _within(scores_train) and _within(scores_held)
-
-
 def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say: Stages, propose: bool) -> dict:
-    # the refit minimises the residual in noise units, what the verdict judges (data.unit_change: in spread
-    # units the noisiest channels' noise swamps a precise channel's misfit)
-    evaluate = evaluator(runner, unit="noise")
-    say("nominal", "re-simulating with the nominal model")
     nominal = Model()
-    sims_nominal = runner.simulate(nominal)
-    if sims_nominal is None:
-        raise ConfigError("the nominal model diverges on these recordings")
-    free = rig_slots(data)
-    r_nominal = residual_vector(data, sims_nominal, unit="noise")
-    say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
-    at = np.array([value_of(nominal, s) for s in free])
-    rig_columns = jacobian(evaluate, nominal, free, at, r_nominal)
-    data.idle = frozenset(s.name for s, column in zip(free, rig_columns.T) if not np.any(column))
-    live = [i for i, s in enumerate(free) if s.name not in data.idle]
-    free, at, rig_columns = [free[i] for i in live], at[live], rig_columns[:, live]
-    current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal)[0] if free else nominal
-    sims = runner.simulate(current)
-    if free and sims is not None and compass_worth(fit_scores(data, sims, "train")):
-        say("refit", "the refit is short of the noise: a pattern search over the same parameters (stick-slip makes "
-            "the cost rough)")
-        current = compass(evaluate, current, free, [value_of(current, s) for s in free],
-                          residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION)
-        sims = runner.simulate(current)
-    rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
-    if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
-        current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
-    say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
-    noisy = runner.simulate(current, noise_seed=NOISE_SEED)
-    if noisy is not None:
-        add_closed_loop_noise(data, sims, noisy)
-    if any(finer_discretisation(data.rig, scenario_from_recording(r, data.rig), FINER) for r in data.recordings):
-        say("noise", f"simulating the refit model {FINER} x finer (segments, step): what our own discretisation leaves")
-        finer = runner.simulate(current, finer=FINER)
-        if finer is not None:
-            add_discretisation_error(data, sims, finer)
+    refit = refit_nominal(data, runner, say)
+    sims_nominal, current, sims, free, rig_columns = refit.sims_nominal, refit.model, refit.sims, refit.free, refit.rig_columns
+    calibrate_noise(data, runner, current, sims, say)
     per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
@@ -228,7 +120,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
         results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle, per) for c in top])
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [_gains(scored(data, r, r["sims"]), train, held)  # scored here, where
+        fitted = [gains(scored(data, r, r["sims"]), train, held)  # scored here, where
                   for r in results if "error" not in r]  # the data has the closed-loop noise the workers' copies lack
         if not fitted:
             break
@@ -241,26 +133,26 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         # parameter pinned at its tolerance bound (beyond_tolerance): that is evidence of its own
         best = fitted[0]
         later = bool(current.effects) and (best["effect"], best["where"]) not in {(c.effect, c.where) for c in pinned}
-        if _earns_place(best, later):
+        if earns_place(best, later):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
-            best = _gains(polish(data, runner, best, rig_start={}), train, held)  # {}: the datasheet's values
+            best = gains(polish(data, runner, best, rig_start={}), train, held)  # {}: the datasheet's values
             room = max_effects - len(current.effects) >= 2
             alternative = offset_alternative(data, runner, current, best) if room else None
             if alternative is not None:
-                alternative = _gains(alternative, train, held)
+                alternative = gains(alternative, train, held)
                 if alternative["score"] > best["score"] + PAIR_MARGIN:  # restart the single from the pair's levels
                     again = single_from_pair(data, runner, best, alternative)
-                    again = again and _gains(again, train, held)
+                    again = again and gains(again, train, held)
                     if again is not None and again["score"] > best["score"]:
                         best = again
-                if alternative["score"] > best["score"] + PAIR_MARGIN and _earns_place(alternative, later):
+                if alternative["score"] > best["score"] + PAIR_MARGIN and earns_place(alternative, later):
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
                     best, alternative = alternative, best
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
-        if not _earns_place(best, later):  # judged on the final (polished) model, never on a promise
+        if not earns_place(best, later):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"],
-                             "why": _shortfall(best, later)})
+                             "why": shortfall(best, later)})
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
@@ -310,17 +202,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                   "ablated": ablated[i]["noise_ratio"], "held_without": ablated[i]["nrmse"]}
         findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
-    if not current.effects:
-        verdict = "nothing_missing" if within_noise(train_f, held_f) else "unexplained"
-    else:
-        verdict = "explained" if within_noise(train_f, held_f) or share >= EXPLAINED_SHARE else "unexplained"
+    verdict = verdict_of(current, train_f, held_f, share)
     alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
     report = {
         "format": "flexarm-diagnosis/1",
         "rig": data.rig.name,
         "recordings": data.names,
         "verdict": verdict,
-        "verdict_reason": _verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share),
+        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -373,74 +262,6 @@ def _noise_table(data: Data) -> list[dict]:
     return [{"recording": n, "channel": c, "noise": noise[c], "declared": float(data.rig.channels[c].get("noise", 0.0)),
              "discretisation": error.get(c, 0.0), "unit": data.rig.channels[c]["unit"]}
             for n, chans, noise, error in zip(data.names, data.channels, data.noise, model) for c in chans]
-
-
-def _verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float) -> str:
-    worst = max((train, held), key=lambda s: s["worst_ratio"])
-    now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
-           f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
-    if verdict == "nothing_missing":
-        return f"the nominal model, refit within tolerance, is within {NOISE_MARGIN:g} x the noise on every channel: {now}"
-    if verdict == "explained":
-        within = within_noise(train, held)
-        return ((f"the findings bring the model within {NOISE_MARGIN:g} x the noise" if within else
-                 f"the findings remove {100 * share:.0f} % of the validation residual above the noise (at least "
-                 f"{100 * EXPLAINED_SHARE:.0f} % asked); what is left no further catalogue effect explains")
-                + f" ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, {refit_held['noise_ratio']:.2f} x)")
-    return (f"the residual stays above {NOISE_MARGIN:g} x the noise ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, "
-            f"{refit_held['noise_ratio']:.2f} x) and no further catalogue effect earns its place: see 'residual'")
-
-
-def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: list[dict], held: dict) -> list[int]:
-    """Indices of the findings the data do not tell from no effect: every 95 % interval includes the value at which
-    the effect vanishes (explain.indistinct), and validation without it (`ablated`, fit_scores by finding) is not
-    far worse than with it (`held`): it removes less than EXPLAINED_SHARE of the excess over the noise that
-    validation has without it. A finding that removes more is told from no effect by the data themselves; an
-    interval that still reaches "none" describes where its value is on a rough or many-valleyed cost, not
-    whether it is there (seed 53, watflex-d245fa05: an elbow ripple at a wrong period, validation 7.6 x the noise
-    with it and 66.1 x without (90 %), had its amplitude's interval widened to [-1.87, 6.03] by the training-only
-    fit's distance; dropped, the case became `unexplained` with no finding). Seed 46's spurious sensor gain x1.09
-    [0.968, 1.214] on a cubic strain bridge (8.27 x without it, 7.17 x with: 16 %) is still dropped. An effect on a
-    rig parameter's knob is never vague by its interval: that carries the parameter's tolerance by design (the
-    data fix their product: tie_knob_columns)."""
-    return [i for i, effect in enumerate(model.effects)
-            if knob_partner(data, effect) is None and indistinct(data, effect, ranges.get(i, {}))
-            and explained_share(ablated[i]["noise_ratio"], held["noise_ratio"]) < EXPLAINED_SHARE]
-
-
-def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> tuple[Model, list, list[dict]]:
-    """Backward elimination: drop, one at a time, the effect whose removal from the final model leaves
-    validation best, while that is no worse than MIN_HELD_GAIN (what a finding had to gain to enter);
-    returns the model, its simulations and, per remaining effect, fit_scores of validation without it."""
-    while True:
-        held = fit_scores(data, sims, "held_out")["noise_ratio"]
-        if not model.effects:
-            return model, sims, []
-        say("elimination", f"checking each of the {len(model.effects)} findings on validation data without it")
-        without = []
-        for i in range(len(model.effects)):
-            reduced = Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
-            s = runner.simulate(reduced)
-            without.append((fit_scores(data, s, "held_out"), reduced, s))  # a diverging one scores inf
-        worst = int(np.argmin([w[0]["noise_ratio"] for w in without]))
-        if without[worst][0]["noise_ratio"] > held * (1 + MIN_HELD_GAIN):
-            return model, sims, [w[0] for w in without]
-        say("elimination", f"dropping {model.effects[worst]['effect']} at {model.effects[worst]['where']}: validation "
-            f"{held:.3f} x the noise with it, {without[worst][0]['noise_ratio']:.3f} x without")
-        model, sims = without[worst][1], without[worst][2]
-
-
-def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording]]:
-    """The chosen model's parameters (its effects' and the rig's) refit on all the data, training and
-    validation blocks alike, in noise units (`in_units`): the structure was chosen and judged on data the
-    fit did not see; the numbers reported are then estimated from every sample, each channel weighted by
-    its noise, or by its misfit where the model is further off than that (what least squares needs to
-    be the best estimate). Kept only if it does not diverge."""
-    free = effect_slots_of(data, model) + rig_slots(data)
-    refit, _, _ = levenberg(in_units(evaluator(runner, "all"), unit_change(data, "all", sims=sims)), model, free,
-                            [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
-    new = runner.simulate(refit)
-    return (refit, new) if new is not None else (model, sims)
 
 
 def _scores(data: Data, sims: list[Recording], model: Model) -> dict:

@@ -3,7 +3,7 @@
 Contract: `polish` carries a candidate's fit on (from the refit rig and, given, from the datasheet's values) and
 keeps the better; `offset_alternative` / `single_from_pair` fit an asymmetric Coulomb friction's other form (a
 symmetric friction plus an actuator offset) and back; `alternative_entry` describes a candidate within noise of the
-chosen one for the report. Each returns a result scored like a candidate (screening.scored).
+chosen one for the report. Each returns a result scored like a candidate (effect_fit.scored).
 """
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ from .data import Data, Model, unit_change
 from .explain import units_at
 from .fitting import Slot, levenberg, rig_slots, unpack, value_of
 from .runner import Runner, evaluator, in_units
-from .screening import scored
+from .effect_fit import scored
 
 POLISH_ITERATIONS = 6
 
 
 def in_noise(data: Data, runner: Runner):
     """Training residuals in noise units, with the closed-loop floor (what the effect fits minimise:
-    screening.fit_candidate)."""
+    effect_fit.fit_candidate)."""
     return in_units(evaluator(runner), unit_change(data))
 
 

@@ -1,12 +1,10 @@
-"""Screening and candidate fits: which catalogue effect's signature the residual carries, and the fit
-of the most promising ones.
+"""Screening: which catalogue effect's signature the residual carries, and which candidates to fit in full.
 
 Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings
 can show (`excited`). `signatures` simulates each once per parameter (and probe level) around the
 current model; `screen` scores each by how much of the training residual its signature explains beyond
-refitting the rig's parameters, and keeps that linear estimate as its start; `fit_candidate` (in a
-worker) fits one together with the rig's parameters and the effects already found, in noise units (a
-ripple's period from a scan first: `scan_period`), and returns its scores on training and validation data.
+refitting the rig's parameters, and keeps that linear estimate as its start; `rescreen` checks the best
+by simulation at that estimate; `shortlist` names the candidates to fit in full (effect_fit.fit_candidate).
 """
 from __future__ import annotations
 
@@ -18,9 +16,9 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..recording import Recording
-from .data import Data, Model, STRIDE, fit_scores, scale_of
-from .fitting import Slot, at_internal, internal_start, jacobian, levenberg, refit_cost, refit_step, rig_slots, value_of
-from .runner import evaluator, held, in_units, simulate_all
+from .data import Data, Model, STRIDE, scale_of
+from .fitting import Slot, refit_cost
+from .runner import evaluator
 
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
 # the other side of neutral (0.9 -> 2.0): a stiffer link than the datasheet's is as likely as a softer one
@@ -41,21 +39,9 @@ SIMULATED_TIE = 0.8  # a candidate rescreen simulated at this share of the best 
 # compliance's 86 %; fitted, it explains validation as well as the compliance, 0.876 against 0.880 x the noise)
 FURTHER_STEPS = 2  # rescreen: times an estimate whose simulated gain still rises is moved on to twice its distance
 RESCREEN = 6  # the best-screening candidates whose linear gain is checked by simulation (rescreen)
-MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (pipeline: the
+MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (validate.gains: the
 # score's charge per parameter); a simpler law at the leader's place is fitted if it screens at this per parameter
-FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one simulation each)
 EXTRAPOLATE = 2.0  # a log-scaled parameter's linear estimate goes at most this far beyond its farthest probe
-QUANTUM_STEPS = 2  # a quantised parameter tries its rounded estimate and this many steps either side
-STEP_LADDER = 1.25  # ... and a ladder of steps from 1 up to its bound, each this much longer than the last
-STEP_ROUNDS = 3  # a quantised parameter's step is searched again after the fit of the rest, this many times at most
-PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
-# or more (the true period is at most a quarter cycle of phase drift across the range from a rung, where a sine
-# still matches it to 0.9: sin(pi / 4) / (pi / 4)) ...
-PERIOD_LADDER = 1.4  # ... and the ratio of one longer period to the next, where it holds less ...
-PERIOD_LONGEST = 8.0  # x the motion's range: ... up to this (a longer ripple is a smooth bend over the range, which the
-# spring and the screening's own start, 3 x the range, already stand for)
-PERIOD_CHECKED = 3  # the periods whose linear estimate fits best are simulated there ...
-PERIOD_STEPS = 2  # ... and moved on by this many Gauss-Newton steps (the scan's columns, one simulation each)
 
 
 @dataclass
@@ -340,202 +326,3 @@ def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Can
     simpler = [c for c in ranked if top and c not in top and c.where == top[0].where
                and len(c.slots) < len(top[0].slots) and c.gain >= MIN_GAIN * len(c.slots)]
     return top + simpler[:1]
-
-
-def effect_slots_of(data: Data, model: Model) -> list[Slot]:
-    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
-    value clamped inside them."""
-    slots = []
-    for i, effect in enumerate(model.effects):
-        for p in CATALOGUE[effect["effect"]][1]:
-            if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
-                size = scale_of(data, p, effect["where"])
-                low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
-                slots.append(Slot(("effect", i, p.name), low, high, p.log))
-    return slots
-
-
-def step_search(evaluate, cand: Candidate, base: Model, start: dict[str, float] | None = None,
-                cost=lambda r: float(r @ r), ladder: bool = True) -> dict[str, float]:
-    """The candidate's values: `start` (default: its linear estimate), with each quantised parameter
-    (a delay in whole control periods has no gradient) set to the step of least `cost` (of the
-    residual), never the neutral 0 steps. Tried: the rounded start and QUANTUM_STEPS neighbours either
-    side, with `ladder` also steps 1, 2, 3 ... growing by STEP_LADDER up to the slot's bound (a closed
-    loop's residual is not convex in its delay: seed 5, a 5 ms tip-sensor delay estimated at 2 ms,
-    whose residual is flat over 1-4 ms and 14x smaller at 5 ms), then the best's QUANTUM_STEPS
-    neighbours until they have all been tried."""
-    values = dict(start or cand.estimate)
-    for name, quantum in cand.quanta.items():
-        slot, k0 = cand.slots[name], round(values[name] / quantum)
-        allowed = lambda k: k >= 1 and slot.low <= k * quantum <= slot.high
-        near = lambda k: {k + j for j in range(-QUANTUM_STEPS, QUANTUM_STEPS + 1)}
-        wanted = near(k0)
-        if ladder:
-            k = 1
-            while k * quantum <= slot.high:
-                wanted.add(k)
-                k = max(k + 1, round(k * STEP_LADDER))
-        costs: dict[int, float] = {}
-        wanted = sorted(k for k in wanted if allowed(k))
-        while wanted:
-            runs = evaluate([cand.model(base, {**values, name: k * quantum}) for k in wanted])
-            costs.update((k, math.inf if r is None else cost(r)) for k, r in zip(wanted, runs))
-            best = min(costs, key=costs.__getitem__)
-            wanted = sorted(k for k in near(best) if allowed(k) and k not in costs) if math.isfinite(costs[best]) else []
-        if costs:
-            values[name] = min(costs, key=costs.__getitem__) * quantum
-    return values
-
-
-def period_ladder(slot: Slot, motion: float) -> list[float]:
-    """Periods to scan within `slot` (rad, m) for a motion range `motion`: evenly spaced in cycles over the
-    range (PERIOD_CYCLES_STEP) down to one cycle, then PERIOD_LADDER apart up to PERIOD_LONGEST ranges."""
-    periods, cycles = [], motion / slot.low
-    while cycles >= 1.0:
-        periods.append(motion / cycles)
-        cycles -= PERIOD_CYCLES_STEP
-    period = periods[-1] * PERIOD_LADDER if periods else slot.low
-    while period <= min(slot.high, PERIOD_LONGEST * motion):
-        periods.append(period)
-        period *= PERIOD_LADDER
-    return periods
-
-
-def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
-                rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> dict[str, float]:
-    """A periodic parameter's value (a ripple a sin(2 pi x / period + phase), effects.Param.periodic) from a scan,
-    with its amplitude and phase: the residual is far from convex in the period (seed 52, a 0.77 rad Watflex
-    elbow ripple fitted at 1.35 rad from its start at 3 x the motion's range, 5 x the noise left), but at a given
-    period it is linear, to first order, in the a sin + b cos the ripple is. Each period of `period_ladder` is
-    simulated twice (the amplitude at its start, phase 0 and pi/2) beside one simulation without the ripple;
-    with one more per other neutral parameter (a spring: its own column); the columns they give, with the rig's,
-    estimate (a, b) by bounded least squares; the PERIOD_CHECKED periods whose estimate leaves the least residual
-    are carried PERIOD_STEPS Gauss-Newton steps on (the same columns, the residual simulated at the estimate: stick-slip
-    makes the first estimate rough; there, seed 52's phase was 0.49 rad off and the estimate lost to a wrong period's),
-    and the one of least `cost` (of the residual) is kept, unless the values given cost less. `values` unchanged for
-    an effect without a periodic parameter."""
-    param = next((p for p in CATALOGUE[cand.effect][1] if p.periodic), None)
-    if param is None:
-        return values
-    period, size, amp = param.name, cand.start["amplitude"], cand.slots["amplitude"]
-    periods = period_ladder(cand.slots[period], cand.slots[period].low / param.low)  # the slot is in motion ranges
-    others = [n for n in cand.neutral if n != "amplitude"]  # a spring beside the ripple: its own column
-    zero = {**values, **cand.neutral}
-    probes = [cand.model(base, zero)] + [cand.model(base, {**zero, n: cand.probe(n)}) for n in others] + [
-        cand.model(base, {**zero, period: p, "amplitude": size, "phase": phase}) for p in periods for phase in (0.0, math.pi / 2)]
-    runs = evaluate(probes)
-    if any(r is None for r in runs[:1 + len(others)]):
-        return values
-    r0, fixed = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(others, runs[1:])]
-    slots = [cand.slots[n] for n in others] + [amp, amp]
-    lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
-
-    def estimate(columns: np.ndarray, r: np.ndarray, at: np.ndarray) -> tuple[float, np.ndarray]:
-        """(residual left, the values of the others, a and b) from the linear solve about `at`."""
-        left, step = refit_step(columns, r, np.concatenate([u_rig, at]), lo, hi)
-        return left, at + step[len(u_rig):]
-
-    def as_values(p: float, x: np.ndarray) -> dict[str, float]:
-        a, b = x[-2:]
-        return {**values, **dict(zip(others, map(float, x[:-2]))), period: p,
-                "amplitude": float(np.clip(math.hypot(a, b), amp.low, amp.high)), "phase": math.atan2(b, a)}
-
-    start = np.array([cand.neutral[n] for n in others] + [0.0, 0.0])
-    ranked = []
-    for k, p in enumerate(periods):
-        r_sin, r_cos = runs[1 + len(others) + 2 * k], runs[2 + len(others) + 2 * k]
-        if r_sin is not None and r_cos is not None:
-            columns = np.column_stack([rig_columns, *fixed, (r_sin - r0) / size, (r_cos - r0) / size])
-            ranked.append((*estimate(columns, r0, start), p, columns))
-    ranked.sort(key=lambda x: x[0])
-    contenders = [(p, x, columns) for _, x, p, columns in ranked[:PERIOD_CHECKED]]
-    for _ in range(PERIOD_STEPS):  # Gauss-Newton steps with the probes' columns: a linear estimate in a closed loop
-        runs = evaluate([cand.model(base, as_values(p, x)) for p, x, _ in contenders])  # with stick-slip is rough
-        contenders = [(p, x if r is None else estimate(columns, r, x)[1], columns) for (p, x, columns), r in zip(contenders, runs)]
-    tried = [values] + [as_values(p, x) for p, x, _ in contenders]
-    costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
-    return tried[int(np.argmin(costs))]
-
-
-def scored(data: Data, result: dict, sims: list[Recording]) -> dict:
-    """`result` with its simulations and scores on every part."""
-    return {**result, "sims": sims, "train": fit_scores(data, sims, "train"),
-            "held_out": fit_scores(data, sims, "held_out"), "all": fit_scores(data, sims, "all")}
-
-
-def restep(evaluate, cand: Candidate, free: list[Slot], model: Model, cost: float, J: np.ndarray, iters: int):
-    """A quantised parameter's step searched again once the rest is fitted (the rig's parameters had
-    made up for a wrong step; seed 6: a 7 ms command delay stayed at 5 ms), each step judged by its
-    residual after the rest is re-optimised to first order (refit_cost with the fit's Jacobian), then
-    the rest refit at the new step; kept while the residual falls, at most STEP_ROUNDS times."""
-    if not cand.quanta:
-        return model, cost, J
-    r = evaluate([model])[0]
-    if r is None:
-        return model, cost, J
-    for _ in range(STEP_ROUNDS):
-        rest, found = Model(model.effects[:-1], dict(model.parameters)), model.effects[-1]
-        u, lo, hi = internal_start(free, [value_of(model, s) for s in free])
-        again = step_search(evaluate, cand, rest, {n: found[n] for n in cand.slots},
-                            lambda res: refit_cost(J, res, u, lo, hi), ladder=False)
-        if all(again[n] == found[n] for n in cand.quanta):
-            break
-        trial = cand.model(rest, again)
-        moved, moved_cost, moved_J = levenberg(evaluate, trial, free, [value_of(trial, s) for s in free], J, iters)
-        r_moved = evaluate([moved])[0]
-        if r_moved is None or float(r_moved @ r_moved) >= float(r @ r):
-            break
-        model, cost, J, r = moved, moved_cost, moved_J, r_moved
-    return model, cost, J
-
-
-def fit_candidate(args) -> dict:
-    """Fit one candidate on top of `base` together with the rig's parameters (worker process):
-    start at its linear estimate, Jacobian columns of the rig's parameters from the signatures,
-    of its own parameters by finite differences there, then carry on from a fresh finite-difference
-    Jacobian at that solution; return the fitted model and its simulations.
-
-    The fit minimises the residual in noise units, `per` (the main process' data.unit_change; the rig's
-    Jacobian columns come in spread units): what the verdict judges. In spread units a precise channel's
-    misfit hardly counts against the noisiest channels' noise, and fits stopped in valleys the verdict
-    rejects (a folder rig's 20 N Coulomb friction at 25.1 / 21.9 N with the viscous scale at its bound:
-    4.318 against the truth's 4.362 in spread units, 310 against 209 in noise units)."""
-    base, cand, rig_columns, iters, idle, per = args
-    data = held()
-    data.idle = idle  # this worker's copy of the data learns which rig parameters are idle
-    evaluate = in_units(evaluator(None), per)
-    rig_columns = rig_columns / per[:, None]
-    rig = rig_slots(data)
-    u_rig, lo_rig, hi_rig = internal_start(rig, [value_of(base, s) for s in rig])
-    cost = lambda r: refit_cost(rig_columns, r, u_rig, lo_rig, hi_rig)  # noqa: E731
-    values = step_search(evaluate, cand, base, cost=cost)
-    values = scan_period(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig)
-    trial = cand.model(base, values)
-    index = len(trial.effects) - 1
-    fitted_names = [n for n in cand.slots if n not in cand.quanta]  # a quantised one stays at its step
-    effect_slots = [Slot(("effect", index, n), cand.slots[n].low, cand.slots[n].high, cand.slots[n].log) for n in fitted_names]
-    earlier = effect_slots_of(data, base)  # the effects found before are refit with it
-    free = effect_slots + earlier + rig
-    x0 = [values[n] for n in fitted_names] + [value_of(base, s) for s in earlier + rig]
-    failed = {"effect": cand.effect, "where": cand.where}
-    try:
-        u0 = internal_start(free, x0)[0]
-        r = evaluate([at_internal(u0, free, trial)])[0]
-        if r is None:
-            return {**failed, "error": "diverges at its starting values"}
-        known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
-        J = jacobian(evaluate, trial, free, u0, r, known)
-        model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r)
-        # then on from a fresh Jacobian: the rig's columns above were taken without the effect (at a 0.33 kg
-        # Watflex payload link 2's is another, and the payload lost to an actuator gain at 1.60 x the noise
-        # against 0.97 x once carried on); starting from fresh columns alone lost Quanser's soft link 2
-        model, cost, J = levenberg(evaluate, model, free, [value_of(model, s) for s in free], None, iters)
-        model, cost, J = restep(evaluate, cand, free, model, cost, J, iters)
-    except Exception as exc:  # noqa: BLE001 - a candidate that fails is dropped and reported, never fatal
-        text = str(exc).splitlines()[0] if str(exc) else ""
-        return {**failed, "error": f"{type(exc).__name__}: {text}"}
-    sims = simulate_all(data, model)
-    if sims is None:
-        return {**failed, "error": "the fitted model diverges"}
-    return {**failed, "model": model, "n_params": len(cand.slots), "cost": cost, "screen_gain": cand.gain,
-            "free": free, "J": J, "sims": sims}  # scored by the caller, whose data knows the closed-loop noise

@@ -1,0 +1,116 @@
+"""Re-simulation and refit: the nominal model on the recordings, the rig's parameters refit within their
+tolerances, and what noise and our own discretisation leave.
+
+Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), refits the rig's
+parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
+is near the noise but short of it) and keeps the refit only if validation is no worse; it returns the
+nominal and refit models' simulations, the rig's live slots and their Jacobian columns (spread units, for
+the screening), and marks idle parameters in `data.idle`. `calibrate_noise` adds to `data` what the rig's
+noise leaves in closed loop and what a finer discretisation changes. `final_refit` refits a chosen model's
+parameters on all the data.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import ConfigError
+from ..recording import Recording
+from ..resim import finer_discretisation, scenario_from_recording
+from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, unit_change
+from .effect_fit import effect_slots_of
+from .fitting import Slot, compass, jacobian, levenberg, rig_slots, value_of
+from .refine import POLISH_ITERATIONS
+from .runner import Runner, evaluator, in_units
+from .uncertainty import FINER, NOISE_SEED
+from .validate import NOISE_MARGIN, within
+
+REFIT_ITERATIONS = 8
+COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
+# per parameter each); it stops once no step changes the cost by CHI2_RESOLUTION (6 sweeps halved the steps to
+# 0.4 % of a tolerance at best: a clean Watflex case's strain bridge is 1.3 x its noise at link 2's EI 0.04 % off)
+COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise gets the pattern search; one further
+# off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
+# refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
+CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
+
+
+
+def compass_worth(train: dict) -> bool:
+    """Whether the refit's training scores ask for the pattern search: short of the noise on some channel,
+    but within COMPASS_REACH x the margin (further off, the rig's parameters would only absorb missing physics)."""
+    return not within(train) and train["noise_ratio"] <= COMPASS_REACH * NOISE_MARGIN
+
+
+@dataclass
+class Refit:
+    """The nominal model's simulations and the refit's: `model` (the rig's parameters refit, or the nominal
+    model where the refit did not earn its place) with its `sims`, the refit's live `free` slots and their
+    Jacobian columns at the nominal model (`rig_columns`, spread units: what the screening compares)."""
+
+    sims_nominal: list[Recording]
+    model: Model
+    sims: list[Recording]
+    free: list[Slot]
+    rig_columns: np.ndarray
+
+
+def refit_nominal(data: Data, runner: Runner, say) -> Refit:
+    """Re-simulate the nominal model and refit the rig's parameters within their tolerances (see the module's
+    contract); `say(kind, message)` hears each stage."""
+    # the refit minimises the residual in noise units, what the verdict judges (data.unit_change: in spread
+    # units the noisiest channels' noise swamps a precise channel's misfit)
+    evaluate = evaluator(runner, unit="noise")
+    say("nominal", "re-simulating with the nominal model")
+    nominal = Model()
+    sims_nominal = runner.simulate(nominal)
+    if sims_nominal is None:
+        raise ConfigError("the nominal model diverges on these recordings")
+    free = rig_slots(data)
+    r_nominal = residual_vector(data, sims_nominal, unit="noise")
+    say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
+    at = np.array([value_of(nominal, s) for s in free])
+    rig_columns = jacobian(evaluate, nominal, free, at, r_nominal)
+    data.idle = frozenset(s.name for s, column in zip(free, rig_columns.T) if not np.any(column))
+    live = [i for i, s in enumerate(free) if s.name not in data.idle]
+    free, at, rig_columns = [free[i] for i in live], at[live], rig_columns[:, live]
+    current = levenberg(evaluate, nominal, free, at, rig_columns, REFIT_ITERATIONS, r_nominal)[0] if free else nominal
+    sims = runner.simulate(current)
+    if free and sims is not None and compass_worth(fit_scores(data, sims, "train")):
+        say("refit", "the refit is short of the noise: a pattern search over the same parameters (stick-slip makes "
+            "the cost rough)")
+        current = compass(evaluate, current, free, [value_of(current, s) for s in free],
+                          residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION)
+        sims = runner.simulate(current)
+    rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
+    if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
+        current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
+    return Refit(sims_nominal, current, sims, free, rig_columns)
+
+
+def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:
+    """Add to `data` what the rig's noise leaves in closed loop (`model` simulated with noise on) and, where a
+    finer discretisation exists, what it changes (data.add_closed_loop_noise, add_discretisation_error)."""
+    say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
+    noisy = runner.simulate(model, noise_seed=NOISE_SEED)
+    if noisy is not None:
+        add_closed_loop_noise(data, sims, noisy)
+    if any(finer_discretisation(data.rig, scenario_from_recording(r, data.rig), FINER) for r in data.recordings):
+        say("noise", f"simulating the refit model {FINER} x finer (segments, step): what our own discretisation leaves")
+        finer = runner.simulate(model, finer=FINER)
+        if finer is not None:
+            add_discretisation_error(data, sims, finer)
+
+
+def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording]]:
+    """The chosen model's parameters (its effects' and the rig's) refit on all the data, training and
+    validation blocks alike, in noise units (`in_units`): the structure was chosen and judged on data the
+    fit did not see; the numbers reported are then estimated from every sample, each channel weighted by
+    its noise, or by its misfit where the model is further off than that (what least squares needs to
+    be the best estimate). Kept only if it does not diverge."""
+    free = effect_slots_of(data, model) + rig_slots(data)
+    refit, _, _ = levenberg(in_units(evaluator(runner, "all"), unit_change(data, "all", sims=sims)), model, free,
+                            [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
+    new = runner.simulate(refit)
+    return (refit, new) if new is not None else (model, sims)
