@@ -436,7 +436,7 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %).
     nominal_split() joins it with the same interval moved to the datasheet's split (gain 1.00)."""
     from watflex_sim.diagnosis.uncertainty import tie_knob_columns, tolerance_sd
-    from watflex_sim.diagnosis.effect_fit import effect_slots_of
+    from watflex_sim.diagnosis.fitting import effect_slots_of
     from watflex_sim.diagnosis.fitting import rig_slots
 
     data = prepare(laser_recordings, ["a", "b"])
@@ -605,7 +605,7 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
     from watflex_sim.diagnosis.fitting import levenberg, value_of
     from watflex_sim.diagnosis.runner import Runner, evaluator, in_units
-    from watflex_sim.diagnosis.effect_fit import effect_slots_of
+    from watflex_sim.diagnosis.fitting import effect_slots_of
 
     truth = 0.4  # kg
     recs = []
@@ -784,3 +784,50 @@ def test_a_difference_over_a_cliff_is_taken_from_the_gentler_side():
     assert narrow[1] - narrow[0] < 0.001
     white = 1.96 / (3 * np.sqrt(1000))  # the white-noise half-width from the gentle column
     assert white <= (wide[1] - wide[0]) / 2 <= 1.6 * white
+
+
+def test_the_screening_refits_the_findings_so_far_beside_the_rigs_parameters(laser_recordings):
+    """screening.with_findings: in a later round each parameter of the effects found so far gets a Jacobian column
+    (per unit of its value; a log-scaled one's from a log step, divided by its value) on a linear slot, so `screen`
+    refits them to first order as the candidate fits will. The residual here is what a second effect leaves once a
+    first one (an actuator gain) has taken up part of it: the second's signature s = g + e (g: the gain's column),
+    r0 = -(s - g) = -e. Held at its value, the gain lets s explain only |e|^2 / (|g|^2 + |e|^2) = 8 % of r0 (seed 55:
+    a current limit behind a gain screened at -2.6 %); refit beside it, s explains all of it (linear algebra: r0
+    lies in the span of g and s), at its true size 1.0, the gain moving by -1.0 within its bounds (0.1-5). Columns by a linear stand-in for the simulation (exact for a
+    linear slot; a log step of 0.1 gives (e^0.1 - 1) / 0.1 = 1.052 x the slope)."""
+    from watflex_sim.diagnosis import Candidate, screen
+    from watflex_sim.diagnosis.fitting import effect_slots_of
+    from watflex_sim.diagnosis.screening import with_findings
+
+    data = prepare(laser_recordings, ["a", "b"])
+    model = Model([dict(effect="actuator_gain", where="voltage_cmd", ratio=1.8),
+                   dict(effect="dwell_time_stiction", where="hub", gain=0.5, time_constant=2.0)])
+    slots = effect_slots_of(data, model)
+    assert [(s.name, s.log) for s in slots] == [("ratio", False), ("gain", False), ("time_constant", True)]
+    rng = np.random.default_rng(3)
+    n = 600
+    g, d1, d2 = rng.normal(size=n), rng.normal(size=n), rng.normal(size=n)  # per unit of ratio, gain, time constant
+    e = 0.3 * rng.normal(size=n)
+    r0 = -e
+
+    def evaluate(models):
+        return [r0 + (m.effects[0]["ratio"] - 1.8) * g + (m.effects[1]["gain"] - 0.5) * d1
+                + (m.effects[1]["time_constant"] - 2.0) * d2 for m in models]
+
+    rig = rng.normal(size=(n, 1)) * 1e-3
+    free, at = [Slot(("param", "p"), 0.95, 1.05)], np.array([1.0])
+    columns, linear, values = with_findings(evaluate, data, model, r0, rig, free, at)
+    assert columns.shape == (n, 4) and [s.log for s in linear] == [False] * 4
+    assert np.allclose(columns[:, 1], g) and np.allclose(columns[:, 2], d1)
+    assert np.allclose(columns[:, 3], d2 * math.expm1(0.1) / 0.1)
+    assert list(values) == [1.0, 1.8, 0.5, 2.0]
+
+    def candidate():
+        return Candidate("current_saturation", "voltage_cmd", {"k": 0.5}, {"k": Slot(("effect", -1, "k"), 0.0, 3.0)},
+                         {"k": 0.0}, signature={1.0: {"k": g + e}})
+    held, refit = candidate(), candidate()
+    screen([held], rig, free, at, r0)
+    screen([refit], columns, linear, values, r0)
+    assert held.gain < 0.1
+    assert refit.gain > 0.99 and refit.estimate["k"] == pytest.approx(1.0, rel=0.01)
+    assert with_findings(evaluate, data, Model(), r0, rig, free, at)[0] is rig  # nothing found: the rig's alone

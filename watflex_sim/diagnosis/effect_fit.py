@@ -4,7 +4,7 @@ Contract: `fit_candidate` fits one screened candidate (screening.Candidate) on t
 together with the rig's parameters and the effects found before, in noise units: a quantised parameter's
 step by search (`step_search`, again after the rest is fitted: `restep`), a ripple's period by a scan
 (`scan_period`), the rest by Levenberg-Marquardt; it returns the fitted model, its Jacobian and its
-simulations (scored by the caller, `scored`). `effect_slots_of` gives the slots of a model's effects.
+simulations (scored by the caller, `scored`).
 """
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ import numpy as np
 
 from ..effects import CATALOGUE
 from ..recording import Recording
-from .data import Data, Model, fit_scores, scale_of
-from .fitting import Slot, at_internal, internal_start, jacobian, levenberg, refit_cost, refit_step, rig_slots, value_of
+from .data import Data, Model, fit_scores
+from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost, refit_step,
+                      rig_slots, value_of)
 from .runner import evaluator, held, in_units, simulate_all
 from .screening import Candidate
 
@@ -31,19 +32,6 @@ PERIOD_LONGEST = 8.0  # x the motion's range: ... up to this (a longer ripple is
 # spring and the screening's own start, 3 x the range, already stand for)
 PERIOD_CHECKED = 3  # the periods whose linear estimate fits best are simulated there ...
 PERIOD_STEPS = 2  # ... and moved on by this many Gauss-Newton steps (the scan's columns, one simulation each)
-
-
-def effect_slots_of(data: Data, model: Model) -> list[Slot]:
-    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
-    value clamped inside them."""
-    slots = []
-    for i, effect in enumerate(model.effects):
-        for p in CATALOGUE[effect["effect"]][1]:
-            if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
-                size = scale_of(data, p, effect["where"])
-                low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
-                slots.append(Slot(("effect", i, p.name), low, high, p.log))
-    return slots
 
 
 def step_search(evaluate, cand: Candidate, base: Model, start: dict[str, float] | None = None,

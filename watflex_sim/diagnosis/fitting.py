@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import lsq_linear
 
+from ..effects import CATALOGUE
 from ..engine import SimulationError
-from .data import Data, Model
+from .data import Data, Model, scale_of
 from .runner import evaluator, hold
 
 log = logging.getLogger(__name__)
@@ -99,6 +100,19 @@ def rig_slots(data: Data) -> list[Slot]:
     the recordings do not depend on (`data.idle`: a locked joint's, a link not mounted)."""
     return [Slot(("param", n), 1 - p["tolerance"], 1 + p["tolerance"]) for n, p in data.rig.parameters.items()
             if n not in data.idle]
+
+
+def effect_slots_of(data: Data, model: Model) -> list[Slot]:
+    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
+    value clamped inside them."""
+    slots = []
+    for i, effect in enumerate(model.effects):
+        for p in CATALOGUE[effect["effect"]][1]:
+            if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
+                size = scale_of(data, p, effect["where"])
+                low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
+                slots.append(Slot(("effect", i, p.name), low, high, p.log))
+    return slots
 
 
 def fd_step(slot: Slot, u: float) -> float:

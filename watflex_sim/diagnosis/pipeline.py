@@ -26,7 +26,8 @@ from .locate import locate
 from .refine import alternative_entry, offset_alternative, polish, single_from_pair
 from .refit import calibrate_noise, final_refit, refit_nominal
 from .runner import Runner, evaluator
-from .screening import RESCREEN, SCREEN_TOP, candidates, make_candidate, rescreen, screen, shortlist, signatures
+from .screening import (RESCREEN, SCREEN_TOP, candidates, make_candidate, rescreen, screen, shortlist, signatures,
+                        with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
 from .uncertainty import final_intervals
 from .validate import (NOISE_MARGIN, earns_place, eliminate, explained_share, gains, shortfall, vague_findings, verdict_of,
@@ -107,10 +108,11 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         say("signatures", f"round {round_}: taking the signatures of {len(live)} candidate effects "
             f"({sum(len(c.probes()) for c in live)} probe simulations)")
         signatures(data, runner, current, sims, r0, live)
-        at = np.array([value_of(current, s) for s in free])
-        screen(live, rig_columns, free, at, r0)
+        columns, slots, at = with_findings(evaluator(runner), data, current, r0, rig_columns, free,
+                                           np.array([value_of(current, s) for s in free]))
+        screen(live, columns, slots, at, r0)
         live.sort(key=lambda c: (-c.gain, c.effect, c.where))
-        rescreen(evaluator(runner), live[:RESCREEN], current, rig_columns, free, at, r0)
+        rescreen(evaluator(runner), live[:RESCREEN], current, columns, slots, at, r0)
         screened_report.append([{"effect": c.effect, "where": c.where, "explained": round(c.gain, 4)}
                                 | ({} if c.checked is None else {"simulated": round(c.checked, 4)}) for c in live[:8]])
         top = shortlist(live, screen_top)

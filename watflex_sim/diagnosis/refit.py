@@ -19,8 +19,7 @@ from ..model import ConfigError
 from ..recording import Recording
 from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, unit_change
-from .effect_fit import effect_slots_of
-from .fitting import Slot, compass, jacobian, levenberg, rig_slots, value_of
+from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .refine import POLISH_ITERATIONS
 from .runner import Runner, evaluator, in_units
 from .uncertainty import FINER, NOISE_SEED

@@ -20,9 +20,9 @@ import numpy as np
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
-from .fitting import Slot, at_internal, fd_step, intervals, jacobian, refit_cost, residual_variance, rig_slots, value_of
+from .fitting import (Slot, at_internal, effect_slots_of, fd_step, intervals, jacobian, refit_cost, residual_variance,
+                      rig_slots, value_of)
 from .runner import Runner, evaluator, in_units
-from .effect_fit import effect_slots_of
 from .tolerance import knob_partner
 
 SPLIT_WIDTH = 4.0  # x |all-data - training-only estimate|: the least half-width of a 95 % interval (final_intervals)
