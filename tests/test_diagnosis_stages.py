@@ -436,8 +436,7 @@ def test_an_effect_on_a_rig_parameters_knob_is_as_uncertain_as_that_parameter(la
     pair look separable (seed 6, watflex-b2b8e0e9: a link stiffness 1.32 for 1.386, interval +-0.05 %).
     nominal_split() joins it with the same interval moved to the datasheet's split (gain 1.00)."""
     from watflex_sim.diagnosis.uncertainty import tie_knob_columns, tolerance_sd
-    from watflex_sim.diagnosis.fitting import effect_slots_of
-    from watflex_sim.diagnosis.fitting import rig_slots
+    from watflex_sim.diagnosis.fitting import effect_slots_of, rig_slots
 
     data = prepare(laser_recordings, ["a", "b"])
     model = Model([dict(effect="sensor_gain", where="tip_sensor", ratio=1.3)], {"tip_sensor_gain": 1.02})
@@ -603,9 +602,8 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     interval worth having (measured: 0.4025 kg, alone [0.4003, 0.4029], widened [0.3874, 0.4158]: +-3.6 %)."""
     from watflex_sim.diagnosis import uncertainty
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
-    from watflex_sim.diagnosis.fitting import levenberg, value_of
+    from watflex_sim.diagnosis.fitting import effect_slots_of, levenberg, value_of
     from watflex_sim.diagnosis.runner import Runner, evaluator, in_units
-    from watflex_sim.diagnosis.fitting import effect_slots_of
 
     truth = 0.4  # kg
     recs = []
