@@ -8,7 +8,7 @@ from watflex_sim import load_scenario, simulate
 from watflex_sim.diagnosis import Model, Slot, intervals, prepare
 from watflex_sim.diagnosis.data import measured_noise, split_blocks
 from watflex_sim.diagnosis.explain import direction, indistinct, physical_place, units_at
-from watflex_sim.diagnosis.fitting import huber_threshold
+from watflex_sim.diagnosis.fitting import huber_threshold, residual_variance
 from watflex_sim.diagnosis.validate import explained_share
 from watflex_sim.diagnosis.tolerance import fold_within_tolerance
 from watflex_sim.model import load_model
@@ -164,6 +164,31 @@ def test_an_interval_reaches_along_a_valley_to_the_datasheets_value():
     with_mean = intervals(slots, model, J, r, prior, prior_mean=[tolerance_centre(s) for s in slots])[0]
     assert without[1] < 2.05 < with_mean[1]
     assert with_mean[0] == pytest.approx(without[0], abs=1e-12)
+
+
+def test_a_model_errors_reach_is_what_it_can_move_the_estimate_not_what_the_prior_leaves_loose():
+    """y = (a + b) t + noise (sd 0.01), a an effect's parameter, b a rig parameter with a tolerance prior (sd 0.05);
+    a model error e = 0.02 t, which the columns absorb whole: least squares with the prior moves a by exactly
+    0.02 and b by nothing (the prior holds b; linear algebra), so the interval reaches 0.02 further, the bound
+    |g_a| |P e| met with equality. The bound sd_a |P e| / s, in which a's sd is the prior's 0.05 the data cannot
+    narrow, reached 40 x that (seed 56: a link stiffness x1.26, tied to link 2's EI, got its whole bounds
+    [0.02, 153]). Without the prior both bounds are the same: sd_a |P e| / s."""
+    t = np.linspace(0, 1, 200)
+    y = 2.0 * t + 0.01 * np.random.default_rng(0).normal(size=t.size)
+    a = float(t @ y / (t @ t)) - 1.0
+    slots = [Slot(("effect", 0, "a"), -10, 10), Slot(("param", "b"), 0.5, 1.5)]
+    model = Model([{"effect": "x", "a": a}], {"b": 1.0})
+    J, r, error = np.column_stack([t, t]), (a + 1.0) * t - y, 0.02 * t
+    prior = [math.inf, 0.05]
+    half = lambda lo_hi: (lo_hi[1] - lo_hi[0]) / 2  # noqa: E731
+    reach = half(intervals(slots, model, J, r, prior, model_error=error)[0]) - half(intervals(slots, model, J, r, prior)[0])
+    assert reach == pytest.approx(0.02, rel=1e-6)
+    s2 = residual_variance(r, 2)
+    sd = math.sqrt(np.linalg.inv(J.T @ J / s2 + np.diag([0.0, 0.05**-2]))[0, 0])  # ~0.05: the prior's
+    assert sd * np.linalg.norm(error) / math.sqrt(s2) > 30 * reach  # the former bound
+    alone = [intervals(slots[:1], model, J[:, :1], r, model_error=e)[0] for e in (error, None)]
+    sd_alone = math.sqrt(residual_variance(r, 1) / float(t @ t))
+    assert half(alone[0]) - half(alone[1]) == pytest.approx(sd_alone * np.linalg.norm(error) / math.sqrt(residual_variance(r, 1)), rel=1e-6)
 
 
 def test_direction_follows_the_final_parameters():
@@ -598,8 +623,9 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     1.5 s, noise off) recorded with a 0.4 kg tip payload by a 2 x finer discretisation (24 segments a link, 0.25 ms:
     another implementation of the same datasheet). Our model (12 segments, 0.5 ms) fitted to them puts the payload
     off by its own discretisation's bias, with an interval from the data alone that misses the truth; the bound
-    |b| <= sd |P e| / s on the bias of the error e a finer model shows reaches past the truth, and stays an
-    interval worth having (measured: 0.4025 kg, alone [0.4003, 0.4029], widened [0.3874, 0.4158]: +-3.6 %)."""
+    |b| <= |g| |P e| on the bias of the error e a finer model shows (fitting.intervals) reaches past the truth, and
+    stays an interval worth having (measured: 0.4025 kg, alone [0.4003, 0.4029], widened [0.3874, 0.4158]: +-3.6 %;
+    the same digits with the former bound sd |P e| / s)."""
     from watflex_sim.diagnosis import uncertainty
     from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
     from watflex_sim.diagnosis.fitting import effect_slots_of, levenberg, value_of

@@ -298,10 +298,14 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
     `model_error`: how far the model's residual is from a more exact model's at the same parameters (in r's units;
     uncertainty.discretisation_error). Such an error biases a least-squares estimate by b = -cov J' e / s^2, in a
     direction the linearisation gets wrong (seed 41: a quarter of a payload's bias, the wrong sign for a Coulomb
-    friction), but never by more than |b_i| <= sd_i |P e| / s (Cauchy-Schwarz; P e: the part of e the parameters'
-    columns can absorb, the rest no fit can follow). The interval reaches that bound beyond the noise's: on the
-    Watflex, where |P e| / s is 180-320 (e: twice what a 2 x finer model changes), that is 180-320 sd, against
-    estimates off by 10-270 sd on recordings of a 3 x finer model (seeds 51-53, docs/diagnosis.md)."""
+    friction), but never by more than |b_i| <= |g_i| |P e|, g_i the i-th row of cov J' / s^2 (Cauchy-Schwarz; P e:
+    the part of e the parameters' columns can absorb, the rest no fit can follow). Without a prior |g_i| = sd_i / s;
+    with one, |g_i|^2 = (cov - cov P cov)_ii / s^2: the part of a parameter's spread that the prior alone sets (an
+    effect's ratio turning the same knob as a rig parameter, tie_knob_columns) is no way for the data's error to move
+    it (seed 56: a Watflex link 2 stiffness x1.26 got [0.02, 153], its whole bounds, from sd_i |P e| / s). The
+    interval reaches that bound beyond the noise's: on the Watflex, where |P e| / s is 180-320 (e: twice what a
+    2 x finer model changes), that is up to 180-320 sd, against estimates off by 10-270 sd on recordings of a 3 x
+    finer model (seeds 51-53, docs/diagnosis.md)."""
     n, p = r.size, len(free)
     if p == 0 or n <= p:
         return {}
@@ -317,7 +321,7 @@ def intervals(free: list[Slot], model: Model, J: np.ndarray, r: np.ndarray, prio
     reach_error = np.zeros(p)
     if model_error is not None and s2 > 0:
         absorbed = J @ np.linalg.lstsq(J, model_error, rcond=None)[0]
-        reach_error = np.sqrt(np.maximum(np.diag(cov), 0.0)) * float(np.linalg.norm(absorbed)) / math.sqrt(s2)
+        reach_error = np.linalg.norm(cov @ J.T, axis=1) / s2 * float(np.linalg.norm(absorbed))  # |g_i| |P e|
     shift, scatter = np.zeros(p), np.zeros(p)
     if replicates and len(replicates) >= 2 and s2 > 0:
         moves = np.array([cov @ (J.T @ e) / s2 for e in replicates])

@@ -108,11 +108,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         say("signatures", f"round {round_}: taking the signatures of {len(live)} candidate effects "
             f"({sum(len(c.probes()) for c in live)} probe simulations)")
         signatures(data, runner, current, sims, r0, live)
-        columns, slots, at = with_findings(evaluator(runner), data, current, r0, rig_columns, free,
+        evaluate = evaluator(runner)
+        columns, slots, at = with_findings(evaluate, data, current, r0, rig_columns, free,
                                            np.array([value_of(current, s) for s in free]))
         screen(live, columns, slots, at, r0)
         live.sort(key=lambda c: (-c.gain, c.effect, c.where))
-        rescreen(evaluator(runner), live[:RESCREEN], current, columns, slots, at, r0)
+        rescreen(evaluate, live[:RESCREEN], current, columns, slots, at, r0)
         screened_report.append([{"effect": c.effect, "where": c.where, "explained": round(c.gain, 4)}
                                 | ({} if c.checked is None else {"simulated": round(c.checked, 4)}) for c in live[:8]])
         top = shortlist(live, screen_top)

@@ -204,13 +204,14 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
         cand.signature.setdefault(level, {})[name] = (r - r0) / step
 
 
-def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at: np.ndarray, r0: np.ndarray) -> None:
+def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: np.ndarray, r0: np.ndarray) -> None:
     """Score each candidate by how much of the training residual its signature explains beyond
-    what refitting the rig's parameters explains (bounded linear least squares), and keep the
-    linear estimate of its parameters as the start of its fit."""
+    what refitting `slots` explains (bounded linear least squares on their `columns`, from their values `at`:
+    the rig's parameters and the findings so far, `with_findings`), and keep the linear estimate of its
+    parameters as the start of its fit."""
     cost0 = float(r0 @ r0) or 1.0
-    lo = np.array([s.low for s in free]) - at
-    hi = np.array([s.high for s in free]) - at
+    lo = np.array([s.low for s in slots]) - at
+    hi = np.array([s.high for s in slots]) - at
 
     def solve(columns, low, high):
         norms = np.linalg.norm(columns, axis=0)
@@ -218,20 +219,20 @@ def screen(cands: list[Candidate], rig_columns: np.ndarray, free: list[Slot], at
         result = lsq_linear(columns / norms, -r0, bounds=(low * norms, high * norms))
         return float(np.sum((r0 + columns @ (result.x / norms)) ** 2)), result.x / norms
 
-    cost_rig = solve(rig_columns, lo, hi)[0] if free else cost0
+    cost_rig = solve(columns, lo, hi)[0] if slots else cost0
     for cand in cands:
         cand.gain, cand.estimate = -math.inf, dict(cand.start)
-        for level, columns in cand.signature.items():
-            names = list(columns)
-            cols = np.column_stack([rig_columns] + [columns[n][:, None] for n in names])
+        for level, signature in cand.signature.items():
+            names = list(signature)
+            cols = np.column_stack([columns] + [signature[n][:, None] for n in names])
             low = [cand.slots[n].low - cand.neutral[n] if n != "switch" else 0.0 for n in names]
             high = [cand.slots[n].high - cand.neutral[n] if n != "switch" else 3.0 for n in names]
             cost, x = solve(cols, np.r_[lo, low], np.r_[hi, high])
             if (cost_rig - cost) / cost0 <= cand.gain:
                 continue
             cand.gain = (cost_rig - cost) / cost0
-            cand.estimate = dict(cand.probes()[(level, "switch")]) if "switch" in columns else dict(cand.start)
-            for n, a in zip(names, x[len(free):]):
+            cand.estimate = dict(cand.probes()[(level, "switch")]) if "switch" in signature else dict(cand.start)
+            for n, a in zip(names, x[len(slots):]):
                 if n != "switch":
                     slot = cand.slots[n]
                     if slot.log:  # a ratio acts nonlinearly: its signature is linear near its probe only
@@ -259,12 +260,12 @@ def with_findings(evaluate, data: Data, model: Model, r0: np.ndarray, rig_column
     return np.column_stack([rig_columns, J / per_value]), free + linear, np.concatenate([at, values])
 
 
-def rescreen(evaluate, cands: list[Candidate], base: Model, rig_columns: np.ndarray, free: list[Slot],
+def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray, slots: list[Slot],
              at: np.ndarray, r0: np.ndarray) -> None:
     """Check the linear screening of `cands` by simulation: each is simulated at its linear estimate and
-    half-way to it, and `checked` set to the larger share of the training cost those leave once the rig's
-    parameters are re-optimised to first order (`refit_cost`). A signature is a slope at its probe and the
-    rig's parameters absorb part of an effect in the refit: a Watflex link's stiffness screened at 14 %
+    half-way to it, and `checked` set to the larger share of the training cost those leave once `slots` (the
+    rig's parameters and the findings so far, as in `screen`) are re-optimised to first order (`refit_cost`).
+    A signature is a slope at its probe and the rig's parameters absorb part of an effect in the refit: a Watflex link's stiffness screened at 14 %
     and, at its estimate, made the residual 2.2 x worse; the 0.33 kg payload that was there screened at
     12 % with an estimate of 0.08 kg and was not fitted. A quantised parameter keeps its step search.
     Where the gain at the estimate beats the gain half-way, the estimate is moved on to twice its distance from
@@ -274,9 +275,9 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, rig_columns: np.ndar
     todo = [c for c in cands if not c.quanta and c.gain > -math.inf]
     if not todo:
         return
-    lo, hi = np.array([s.low for s in free]), np.array([s.high for s in free])
+    lo, hi = np.array([s.low for s in slots]), np.array([s.high for s in slots])
     cost0 = float(r0 @ r0) or 1.0
-    cost_rig = refit_cost(rig_columns, r0, at, lo, hi)
+    cost_rig = refit_cost(columns, r0, at, lo, hi)
     models, owners = [], []
     for cand in todo:
         origin = {**cand.start, **cand.neutral}
@@ -285,7 +286,7 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, rig_columns: np.ndar
             models.append(cand.model(base, values))
             owners.append(cand)
     def gain_of(r: np.ndarray | None) -> float:
-        return -math.inf if r is None else (cost_rig - refit_cost(rig_columns, r, at, lo, hi)) / cost0
+        return -math.inf if r is None else (cost_rig - refit_cost(columns, r, at, lo, hi)) / cost0
 
     gains: dict[int, list[float]] = {}
     for cand, r in zip(owners, evaluate(models)):
