@@ -439,8 +439,8 @@ def test_elimination_drops_a_finding_that_validation_does_not_need(monkeypatch):
     ratio = {("delay", "viscous_friction"): 1.276, ("delay",): 1.264, ("viscous_friction",): 23.45, (): 23.5}
 
     class Runner:
-        def simulate(self, model):
-            return tuple(e["effect"] for e in model.effects)  # stands for the model's simulations
+        def simulate_models(self, models):
+            return [tuple(e["effect"] for e in m.effects) for m in models]  # stands for each model's simulations
 
     monkeypatch.setattr(validate, "fit_scores", lambda data, sims, part: {"noise_ratio": ratio[sims], "nrmse": ratio[sims] / 100})
     both = Model([{"effect": "delay", "where": "command", "seconds": 0.011},
@@ -855,3 +855,56 @@ def test_the_screening_refits_the_findings_so_far_beside_the_rigs_parameters(las
     assert held.gain < 0.1
     assert refit.gain > 0.99 and refit.estimate["k"] == pytest.approx(1.0, rel=0.01)
     assert with_findings(evaluate, data, Model(), r0, rig, free, at)[0] is rig  # nothing found: the rig's alone
+
+
+def test_the_candidate_fits_simulations_go_together_call_by_call():
+    """runner.Gathered: three threads (the candidate fits) with 3, 1 and 2 calls of different sizes share one
+    evaluator. Each call waits for the other live threads' calls; the k-th calls go together in thread order (a
+    thread that has ended no longer holds the others up), each thread gets back its own answers, and an error of
+    the shared evaluator is raised in every thread that was waiting on it."""
+    import threading
+
+    from watflex_sim.diagnosis.runner import Gathered
+
+    batches = []
+
+    def evaluate(models):
+        batches.append(list(models))
+        if "boom" in models:
+            raise RuntimeError("worker failed")
+        return [m * 10 for m in models]
+
+    calls = {0: [[1, 2], [3], [4, 5, 6]], 1: [[7]], 2: [[8], [9, 10]]}
+    gathered = Gathered(evaluate, len(calls))
+    got = {}
+
+    def work(k):
+        try:
+            got[k] = [gathered.caller(k)(models) for models in calls[k]]
+        finally:
+            gathered.leave()
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in calls]
+    for t in threads[::-1]:  # started in reverse: the order of the batches must not depend on it
+        t.start()
+    for t in threads:
+        t.join(5)
+    assert got == {k: [[m * 10 for m in models] for models in calls[k]] for k in calls}
+    assert batches == [[1, 2, 7, 8], [3, 9, 10], [4, 5, 6]]
+
+    gathered, errors = Gathered(evaluate, 2), []
+
+    def failing(k):
+        try:
+            gathered.caller(k)(["boom"] if k == 0 else [1])
+        except RuntimeError as exc:
+            errors.append((k, str(exc)))
+        finally:
+            gathered.leave()
+
+    threads = [threading.Thread(target=failing, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(5)
+    assert sorted(errors) == [(0, "worker failed"), (1, "worker failed")]

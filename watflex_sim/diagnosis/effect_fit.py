@@ -3,12 +3,14 @@
 Contract: `fit_candidate` fits one screened candidate (screening.Candidate) on top of the current model
 together with the rig's parameters and the effects found before, in noise units: a quantised parameter's
 step by search (`step_search`, again after the rest is fitted: `restep`), a ripple's period by a scan
-(`scan_period`), the rest by Levenberg-Marquardt; it returns the fitted model, its Jacobian and its
-simulations (scored by the caller, `scored`).
+(`scan_period`), the rest by Levenberg-Marquardt; it returns the fitted model and its Jacobian.
+`fit_candidates` fits several at once, their simulations gathered (runner.Gathered), and adds each fitted
+model's simulations (scored by the caller, `scored`).
 """
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 
@@ -17,7 +19,7 @@ from ..recording import Recording
 from .data import Data, Model, fit_scores
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost, refit_step,
                       rig_slots, value_of)
-from .runner import evaluator, held, in_units, simulate_all
+from .runner import Gathered, Runner, evaluator, in_units
 from .screening import Candidate
 
 FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one simulation each)
@@ -168,22 +170,52 @@ def restep(evaluate, cand: Candidate, free: list[Slot], model: Model, cost: floa
     return model, cost, J
 
 
-def fit_candidate(args) -> dict:
-    """Fit one candidate on top of `base` together with the rig's parameters (worker process):
-    start at its linear estimate, Jacobian columns of the rig's parameters from the signatures,
-    of its own parameters by finite differences there, then carry on from a fresh finite-difference
-    Jacobian at that solution; return the fitted model and its simulations.
+def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidate], rig_columns: np.ndarray, iters: int,
+                   per: np.ndarray) -> list[dict]:
+    """`fit_candidate` for every candidate at once, in the order given, each with its fitted model's simulations
+    ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.Gathered:
+    the k-th call of every fit in one lockstep call): one fit per worker left a worker idle once its fit ended or
+    when the fits outnumbered the workers (3 on 2), and simulated one model's recordings, too few for a batch to
+    pay. The same simulations as one fit per worker, so the same results to the digit."""
+    gathered = Gathered(in_units(evaluator(runner), per), len(cands))
+    results: list = [None] * len(cands)
 
-    The fit minimises the residual in noise units, `per` (the main process' data.unit_change; the rig's
-    Jacobian columns come in spread units): what the verdict judges. In spread units a precise channel's
+    def work(k: int) -> None:
+        try:
+            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns / per[:, None], iters)
+        except BaseException as exc:  # noqa: BLE001 - raised again below, in the caller's thread
+            results[k] = exc
+        finally:
+            gathered.leave()
+
+    threads = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(len(cands))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    failed = next((r for r in results if isinstance(r, BaseException)), None)
+    if failed is not None:
+        raise failed
+    fitted = [r for r in results if "model" in r]
+    for result, sims in zip(fitted, runner.simulate_models([r["model"] for r in fitted])):
+        if sims is None:
+            result.pop("model")
+            result["error"] = "the fitted model diverges"
+        else:
+            result["sims"] = sims
+    return results
+
+
+def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_columns: np.ndarray, iters: int) -> dict:
+    """Fit one candidate on top of `base` together with the rig's parameters: start at its linear estimate,
+    Jacobian columns of the rig's parameters from the signatures, of its own parameters by finite differences
+    there, then carry on from a fresh finite-difference Jacobian at that solution; return the fitted model.
+
+    The fit minimises the residual in noise units: `evaluate` gives it in those (the main process'
+    data.unit_change), and `rig_columns` come in them. In spread units a precise channel's
     misfit hardly counts against the noisiest channels' noise, and fits stopped in valleys the verdict
     rejects (a folder rig's 20 N Coulomb friction at 25.1 / 21.9 N with the viscous scale at its bound:
     4.318 against the truth's 4.362 in spread units, 310 against 209 in noise units)."""
-    base, cand, rig_columns, iters, idle, per = args
-    data = held()
-    data.idle = idle  # this worker's copy of the data learns which rig parameters are idle
-    evaluate = in_units(evaluator(None), per)
-    rig_columns = rig_columns / per[:, None]
     rig = rig_slots(data)
     u_rig, lo_rig, hi_rig = internal_start(rig, [value_of(base, s) for s in rig])
     cost = lambda r: refit_cost(rig_columns, r, u_rig, lo_rig, hi_rig)  # noqa: E731
@@ -213,8 +245,5 @@ def fit_candidate(args) -> dict:
     except Exception as exc:  # noqa: BLE001 - a candidate that fails is dropped and reported, never fatal
         text = str(exc).splitlines()[0] if str(exc) else ""
         return {**failed, "error": f"{type(exc).__name__}: {text}"}
-    sims = simulate_all(data, model)
-    if sims is None:
-        return {**failed, "error": "the fitted model diverges"}
     return {**failed, "model": model, "n_params": len(cand.slots), "cost": cost, "screen_gain": cand.gain,
-            "free": free, "J": J, "sims": sims}  # scored by the caller, whose data knows the closed-loop noise
+            "free": free, "J": J}

@@ -19,7 +19,7 @@ import numpy as np
 from ..effects import canonical, canonical_moves
 from ..recording import Recording
 from .data import Data, Model, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
-from .effect_fit import FIT_ITERATIONS, fit_candidate, scored
+from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import finding
 from .fitting import value_of
 from .locate import locate
@@ -121,7 +121,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
-        results = runner.map(fit_candidate, [(current, c, rig_columns, FIT_ITERATIONS, data.idle, per) for c in top])
+        results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [gains(scored(data, r, r["sims"]), train, held)  # scored here, where
                   for r in results if "error" not in r]  # the data has the closed-loop noise the workers' copies lack

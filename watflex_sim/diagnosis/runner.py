@@ -5,14 +5,16 @@ simulated with one `Model`. The jobs of one call (every recording, for one or se
 together in lockstep (resim.resimulate_many, one mujoco.batch.Batch per model structure; a group too small
 for a batch to pay, one by one: lockstep._pays); with
 worker processes they are split into one contiguous share per worker, each stepped on one thread
-(the batch's Python control half is single-threaded, so processes still pay on 2 cores). A model
-that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
+(the batch's Python control half is single-threaded, so processes still pay on 2 cores). Several fits
+running at once (the candidate fits, each in a thread of the main process) put their calls together through
+`Gathered`. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
 when the diagnosis is interrupted or fails (interrupts.stop_pool).
 """
 from __future__ import annotations
 
 import logging
 import multiprocessing
+import threading
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
@@ -132,10 +134,17 @@ class Runner:
 
     def simulate_seeds(self, model: Model, seeds: list[int | None], finer: int = 1) -> list[list[Recording] | None]:
         """`simulate` once per noise seed (None: noise off), all in one lockstep call."""
+        return self._simulate_each([(model, seed) for seed in seeds], finer)
+
+    def simulate_models(self, models: list[Model]) -> list[list[Recording] | None]:
+        """`simulate` for each model (noise off), all in one lockstep call."""
+        return self._simulate_each([(model, None) for model in models])
+
+    def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: int = 1) -> list[list[Recording] | None]:
         n = len(self.data.recordings)
-        sims = self.lockstep(_simulate_some, [(model, i, seed, finer) for seed in seeds for i in range(n)])
+        sims = self.lockstep(_simulate_some, [(model, i, seed, finer) for model, seed in runs for i in range(n)])
         return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]
-                for k in range(len(seeds))]
+                for k in range(len(runs))]
 
     def lockstep(self, fn, jobs: list) -> list:
         """fn(jobs share) -> a result per job, over one share per worker (here: one, on all threads)."""
@@ -179,6 +188,54 @@ def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread"):
             out.append(None if any(p is None for p in mine) else np.concatenate(mine))
         return out
     return evaluate
+
+
+class Gathered:
+    """One evaluator shared by `n` threads (the candidate fits, effect_fit.fit_candidates): a call waits until every
+    thread still running has called, then all their models go to `evaluate` together - one lockstep call over the
+    workers, so a fit that simulates little, or has ended, leaves no worker idle. Call k of each thread goes with
+    call k of the others, in thread order: the same simulations whatever the threads' timing. `leave()` when a
+    thread ends; an error in `evaluate` is raised in every waiting thread."""
+
+    def __init__(self, evaluate, n: int):
+        self.evaluate, self.live = evaluate, n
+        self.waiting: dict[int, list] = {}  # thread index -> its models
+        self.answers: dict[int, object] = {}  # thread index -> its residuals, or the error
+        self.cond = threading.Condition()
+
+    def caller(self, k: int):
+        """Thread k's evaluator: models -> residuals (as `evaluate`)."""
+        def call(models: list) -> list:
+            with self.cond:
+                self.waiting[k] = list(models)
+                self._run_if_all_wait()
+                while k not in self.answers:
+                    self.cond.wait()
+                answer = self.answers.pop(k)
+            if isinstance(answer, BaseException):
+                raise answer
+            return answer
+        return call
+
+    def leave(self) -> None:
+        with self.cond:
+            self.live -= 1
+            self._run_if_all_wait()
+
+    def _run_if_all_wait(self) -> None:
+        if not self.waiting or len(self.waiting) < self.live:
+            return
+        order = sorted(self.waiting)
+        try:
+            out = self.evaluate([m for k in order for m in self.waiting[k]])
+        except BaseException as exc:  # noqa: BLE001 - handed to every waiting thread
+            self.answers.update((k, exc) for k in order)
+        else:
+            start = 0
+            for k in order:
+                self.answers[k], start = out[start:start + len(self.waiting[k])], start + len(self.waiting[k])
+        self.waiting.clear()
+        self.cond.notify_all()
 
 
 def in_units(evaluate, per: np.ndarray):

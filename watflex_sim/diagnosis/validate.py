@@ -136,11 +136,10 @@ def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], s
         if not model.effects:
             return model, sims, []
         say("elimination", f"checking each of the {len(model.effects)} findings on validation data without it")
-        without = []
-        for i in range(len(model.effects)):
-            reduced = Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
-            s = runner.simulate(reduced)
-            without.append((fit_scores(data, s, "held_out"), reduced, s))  # a diverging one scores inf
+        reduced = [Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
+                   for i in range(len(model.effects))]
+        without = [(fit_scores(data, s, "held_out"), m, s)  # a diverging one scores inf
+                   for m, s in zip(reduced, runner.simulate_models(reduced))]
         worst = int(np.argmin([w[0]["noise_ratio"] for w in without]))
         if without[worst][0]["noise_ratio"] > held * (1 + MIN_HELD_GAIN):
             return model, sims, [w[0] for w in without]
