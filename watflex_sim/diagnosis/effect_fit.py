@@ -175,8 +175,8 @@ def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidat
     """`fit_candidate` for every candidate at once, in the order given, each with its fitted model's simulations
     ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.Gathered:
     the k-th call of every fit in one lockstep call): one fit per worker left a worker idle once its fit ended or
-    when the fits outnumbered the workers (3 on 2), and simulated one model's recordings, too few for a batch to
-    pay. The same simulations as one fit per worker, so the same results to the digit."""
+    when the fits outnumbered the workers (3 on 2). The same simulations as one fit per worker, so the same results
+    to the digit."""
     gathered = Gathered(in_units(evaluator(runner), per), len(cands))
     results: list = [None] * len(cands)
 

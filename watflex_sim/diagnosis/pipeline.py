@@ -123,8 +123,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
         results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [gains(scored(data, r, r["sims"]), train, held)  # scored here, where
-                  for r in results if "error" not in r]  # the data has the closed-loop noise the workers' copies lack
+        fitted = [gains(scored(data, r, r["sims"]), train, held) for r in results if "error" not in r]
         if not fitted:
             break
         fitted.sort(key=lambda r: (-r["score"], r["effect"], r["where"]))

@@ -265,9 +265,9 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     """Check the linear screening of `cands` by simulation: each is simulated at its linear estimate and
     half-way to it, and `checked` set to the larger share of the training cost those leave once `slots` (the
     rig's parameters and the findings so far, as in `screen`) are re-optimised to first order (`refit_cost`).
-    A signature is a slope at its probe and the rig's parameters absorb part of an effect in the refit: a Watflex link's stiffness screened at 14 %
-    and, at its estimate, made the residual 2.2 x worse; the 0.33 kg payload that was there screened at
-    12 % with an estimate of 0.08 kg and was not fitted. A quantised parameter keeps its step search.
+    A signature is a slope at its probe and the rig's parameters absorb part of an effect in the refit: a
+    Watflex link's stiffness screened at 14 % and, at its estimate, made the residual 2.2 x worse; the 0.33 kg
+    payload that was there screened at 12 % with an estimate of 0.08 kg and was not fitted. A quantised parameter keeps its step search.
     Where the gain at the estimate beats the gain half-way, the estimate is moved on to twice its distance from
     neutral (`further`), at most FURTHER_STEPS times while that gains more; `checked` and `estimate` follow
     (seed 46, a laser beam 0.26 x as stiff as the datasheet: estimated at 0.43 x, simulated at 26 %, behind
