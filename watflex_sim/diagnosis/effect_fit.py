@@ -178,11 +178,12 @@ def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidat
     when the fits outnumbered the workers (3 on 2). The same simulations as one fit per worker, so the same results
     to the digit."""
     gathered = Gathered(in_units(evaluator(runner), per), len(cands))
+    rig_columns = rig_columns / per[:, None]  # in noise units, as the fits' residuals
     results: list = [None] * len(cands)
 
     def work(k: int) -> None:
         try:
-            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns / per[:, None], iters)
+            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns, iters)
         except BaseException as exc:  # noqa: BLE001 - raised again below, in the caller's thread
             results[k] = exc
         finally:
