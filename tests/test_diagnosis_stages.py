@@ -547,6 +547,55 @@ def test_the_discretisation_error_joins_the_noise_floor(laser_recordings):
             assert data.noise[i][c] == pytest.approx(math.hypot(before[i][c], 0.03), rel=1e-12)
 
 
+def test_a_coarser_discretisation_keeps_a_step_that_divides_the_control_period():
+    """finer_discretisation below 1 (the screening's signatures, screening.SCREEN_FINER): half the segments (rounded,
+    at least 2) and twice the step, the step only where it still divides the 1 ms control period."""
+    from watflex_sim.resim import finer_discretisation
+    from watflex_sim.rigdesc import load_rig
+
+    laser, watflex = load_rig("laser_arm"), load_rig("watflex")
+    assert finer_discretisation(laser, load_scenario("laser_arm_step"), 0.5) == {"n_segments": 6, "timestep": pytest.approx(2e-4)}
+    assert finer_discretisation(watflex, load_scenario("watflex_elbow_step"), 0.5) == {"n_segments": 6, "timestep": pytest.approx(1e-3)}
+    one_ms = load_scenario("watflex_elbow_step", ["timestep=0.001"])  # 2 ms would not divide the 1 ms period
+    assert finer_discretisation(watflex, one_ms, 0.5) == {"n_segments": 6}
+    assert finer_discretisation(watflex, load_scenario("watflex_elbow_step", ["n_segments=2", "timestep=0.001"]), 0.5) == {}
+    assert finer_discretisation(watflex, load_scenario("watflex_elbow_step", ["n_segments=3"]), 0.5) == {
+        "n_segments": 2, "timestep": pytest.approx(1e-3)}
+
+
+def test_signatures_are_differences_at_one_discretisation(monkeypatch):
+    """screening.signatures simulates the probes and the model itself SCREEN_FINER x as fine, in one call, and takes
+    each column against that coarse model: an error of the coarse discretisation common to both cancels. A probe
+    that diverges there is simulated as fine as the model, against the given residual r0. Here the residual is
+    x col + e with e = 5 at the coarse discretisation, 0 at the model's: both columns come out as col exactly."""
+    from watflex_sim.diagnosis import screening
+    from watflex_sim.diagnosis.screening import SCREEN_FINER, Candidate
+
+    col = np.array([1.0, -2.0, 0.5])
+    calls = []
+
+    def evaluator(runner, part="train", unit="spread", finer=1):
+        def evaluate(models):
+            calls.append((finer, len(models)))
+            out = []
+            for m in models:
+                x = sum(e.get("damping", 0.0) + e.get("level", 0.0) for e in m.effects)
+                diverges = finer != 1 and any(e.get("level", 0.0) > 0 for e in m.effects)
+                out.append(None if diverges else x * col + (5.0 if finer != 1 else 0.0))
+            return out
+        return evaluate
+
+    monkeypatch.setattr(screening, "evaluator", evaluator)
+    monkeypatch.setattr(screening, "fed_back", lambda data: set())
+    monkeypatch.setattr(screening, "coarser", lambda data: True)
+    cands = [Candidate(name, "hub", {key: 0.2}, {key: Slot(("effect", -1, key), 0.0, 1.0)}, {key: 0.0})
+             for name, key in (("viscous_friction", "damping"), ("coulomb_friction", "level"))]
+    screening.signatures(None, None, Model(), [], np.zeros(3), cands)
+    assert calls == [(SCREEN_FINER, 3), (1, 1)]  # the base and both probes coarse; the diverged probe again, as fine
+    for cand, key in zip(cands, ("damping", "level")):
+        np.testing.assert_allclose(cand.signature[1.0][key], col, rtol=1e-12)
+
+
 def test_the_watflex_model_is_coarser_than_its_noise_and_the_laser_arm_is_not():
     """What add_discretisation_error exists for (docs/diagnosis.md): a 1 s elbow step re-simulated with
     twice the segments and half the step (24 at 0.25 ms against 12 at 0.5 ms) differs from the model as

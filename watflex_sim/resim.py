@@ -105,17 +105,22 @@ def _built_or_error(scenario: dict, nthread: int, rig: RigDescription):
         return SimulationError(f"the model cannot be built: {exc}")
 
 
-def finer_discretisation(rig: RigDescription, scenario: dict, factor: int) -> dict:
+def finer_discretisation(rig: RigDescription, scenario: dict, factor: float) -> dict:
     """Scenario keys that simulate `scenario` `factor` x finer: that many times the segments per flexible
     part and a physics step that many times shorter ({} for factor 1). What the simulator's own
-    discretisation leaves (its results against a finer one's) is model error the data cannot resolve."""
+    discretisation leaves (its results against a finer one's) is model error the data cannot resolve.
+    A factor below 1 is coarser (the screening's cheap signatures): the segments rounded, at least 2, and the
+    step made longer only where it still divides the control period; {} where neither changes."""
     if factor == 1:
         return {}
     out = {}
     segments = getattr(rig.segmented(scenario["n_segments"]), "n_segments", 0)
-    if segments:
-        out["n_segments"] = factor * segments
-    out["timestep"] = (scenario["timestep"] or model_timestep(rig)) / factor  # s: the scenario's, else the model's
+    if segments and max(2, round(factor * segments)) != segments:
+        out["n_segments"] = max(2, round(factor * segments))
+    step = (scenario["timestep"] or model_timestep(rig)) / factor  # s: the scenario's, else the model's
+    ticks = (scenario.get("control_period_s") or rig.control_period_s) / step  # physics steps per control period
+    if factor > 1 or (round(ticks) >= 1 and abs(ticks - round(ticks)) < 1e-9):
+        out["timestep"] = step
     return out
 
 
@@ -126,7 +131,7 @@ def model_timestep(rig: RigDescription) -> float:
 
 
 def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=None, until=None, noise_seed=None,
-                    finer: int = 1) -> dict:
+                    finer: float = 1) -> dict:
     scenario = scenario_from_recording(rec, rig)
     scenario.update(finer_discretisation(rig, scenario, finer))
     if noise_seed is not None:

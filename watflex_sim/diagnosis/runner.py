@@ -76,15 +76,15 @@ def _residual(model: Model, part: str = "train", unit: str = "spread") -> np.nda
 
 
 def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
-    """The residual of recording i alone on a part (a piece of _residual) for each job (model, i, part, unit),
-    all simulated in lockstep; None for a job whose simulation diverged."""
-    todo = [k for k, (_m, i, part, _u) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
+    """The residual of recording i alone on a part (a piece of _residual) for each job (model, i, part, unit,
+    finer: resim.finer_discretisation's factor), all simulated in lockstep; None for a job whose simulation diverged."""
+    todo = [k for k, (_m, i, part, _u, _f) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
     sims = resimulate_many([(_DATA.recordings[jobs[k][1]], jobs[k][0].effects, jobs[k][0].parameters,
-                             last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]))
+                             last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]), None, jobs[k][4])
                             for k in todo], nthread, _DATA.rig)
     out: list = [np.zeros(0)] * len(jobs)
     for k, sim in zip(todo, sims):
-        _m, i, part, unit = jobs[k]
+        _m, i, part, unit, _f = jobs[k]
         if isinstance(sim, SimulationError):
             out[k] = None
             continue
@@ -172,16 +172,17 @@ class Runner:
         self.close(abort=kind is not None)
 
 
-def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread"):
+def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread", finer: float = 1):
     """models -> residual vectors on a part ('train': what fits minimise; 'all': the final refit) in `unit`
     ('spread', or 'noise': the refit of the rig's parameters), in the pool (one job per model and
-    recording) or in this process. The workers' noise is the data's when the Runner started."""
+    recording) or in this process. The workers' noise is the data's when the Runner started. `finer`:
+    the models simulated that many times finer (below 1: coarser; resim.finer_discretisation; with a Runner)."""
     if runner is None:
         return lambda models: [_residual(m, part, unit) for m in models]
 
     def evaluate(models):
         n = len(runner.data.recordings)
-        pieces = runner.lockstep(_pieces, [(m, i, part, unit) for m in models for i in range(n)])
+        pieces = runner.lockstep(_pieces, [(m, i, part, unit, finer) for m in models for i in range(n)])
         out = []
         for k in range(len(models)):
             mine = pieces[k * n:(k + 1) * n]

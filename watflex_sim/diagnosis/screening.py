@@ -17,6 +17,7 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..recording import Recording
+from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, STRIDE, scale_of
 from .fitting import Slot, effect_slots_of, jacobian, refit_cost, value_of
 from .runner import evaluator
@@ -42,6 +43,9 @@ FURTHER_STEPS = 2  # rescreen: times an estimate whose simulated gain still rise
 RESCREEN = 6  # the best-screening candidates whose linear gain is checked by simulation (rescreen)
 MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (validate.gains: the
 # score's charge per parameter); a simpler law at the leader's place is fitted if it screens at this per parameter
+SCREEN_FINER = 0.5  # signatures are simulated this many times as fine as the model (half the segments, twice the
+# step where that divides the control period): a screening column is a difference of two simulations at one
+# discretisation, which cancels most of its error; the rescreen and the fits then simulate as fine as the model
 EXTRAPOLATE = 2.0  # a log-scaled parameter's linear estimate goes at most this far beyond its farthest probe
 
 
@@ -187,7 +191,9 @@ def sensor_signature(data: Data, sims: list[Recording], cand: Candidate) -> dict
 
 
 def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate]) -> None:
-    """Fill each candidate's signature columns: one simulation per probe, in parallel."""
+    """Fill each candidate's signature columns: one simulation per probe, in parallel, SCREEN_FINER x as fine as
+    the model (`base` too, so each column is a difference at one discretisation); a probe that diverges there is
+    simulated as fine as the model, against `r0`."""
     looped = fed_back(data)
     jobs, owners = [], []
     for cand in cands:
@@ -197,11 +203,27 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
         for key, values in cand.probes().items():
             jobs.append(cand.model(base, values))
             owners.append((cand, key))
-    for (cand, (level, name)), r in zip(owners, evaluator(runner)(jobs)):
+    if not jobs:
+        return
+    full = evaluator(runner)
+    coarse = [] if not coarser(data) else evaluator(runner, finer=SCREEN_FINER)([base] + jobs)
+    if coarse and coarse[0] is not None:
+        runs, against = coarse[1:], [coarse[0]] * len(jobs)
+    else:
+        runs, against = [None] * len(jobs), [r0] * len(jobs)
+    again = [k for k, r in enumerate(runs) if r is None]
+    for k, r in zip(again, full([jobs[k] for k in again]) if again else []):
+        runs[k], against[k] = r, r0
+    for (cand, (level, name)), r, r_base in zip(owners, runs, against):
         if r is None:
             continue  # this probe diverges: no signature at this level
         step = 1.0 if name == "switch" else cand.probe(name, level) - cand.neutral[name]
-        cand.signature.setdefault(level, {})[name] = (r - r0) / step
+        cand.signature.setdefault(level, {})[name] = (r - r_base) / step
+
+
+def coarser(data: Data) -> bool:
+    """Whether the rig's model has a coarser discretisation for the signatures (SCREEN_FINER): segments or a step."""
+    return any(finer_discretisation(data.rig, scenario_from_recording(r, data.rig), SCREEN_FINER) for r in data.recordings)
 
 
 def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: np.ndarray, r0: np.ndarray) -> None:
