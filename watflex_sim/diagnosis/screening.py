@@ -2,7 +2,7 @@
 
 Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings
 can show (`excited`). `signatures` simulates each once per parameter (and probe level) around the
-current model; `screen` scores each by how much of the training residual its signature explains beyond
+current model, half as fine as the model (SCREEN_FINER); `screen` scores each by how much of the training residual its signature explains beyond
 refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate
 as its start; `rescreen` checks the best by simulation at that estimate; `shortlist` names the candidates to
 fit in full (effect_fit.fit_candidate).
