@@ -587,10 +587,13 @@ def test_signatures_are_differences_at_one_discretisation(monkeypatch):
 
     monkeypatch.setattr(screening, "evaluator", evaluator)
     monkeypatch.setattr(screening, "fed_back", lambda data: set())
-    monkeypatch.setattr(screening, "coarser", lambda data: True)
     cands = [Candidate(name, "hub", {key: 0.2}, {key: Slot(("effect", -1, key), 0.0, 1.0)}, {key: 0.0})
              for name, key in (("viscous_friction", "damping"), ("coulomb_friction", "level"))]
-    screening.signatures(None, None, Model(), [], np.zeros(3), cands)
+    class Runner:  # a rig whose model has a coarser discretisation
+        def refinable(self, factor):
+            return factor == SCREEN_FINER
+
+    screening.signatures(None, Runner(), Model(), [], np.zeros(3), cands)
     assert calls == [(SCREEN_FINER, 3), (1, 1)]  # the base and both probes coarse; the diverged probe again, as fine
     for cand, key in zip(cands, ("damping", "level")):
         np.testing.assert_allclose(cand.signature[1.0][key], col, rtol=1e-12)

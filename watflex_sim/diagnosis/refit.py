@@ -17,7 +17,6 @@ import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, unit_change
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .refine import POLISH_ITERATIONS
@@ -95,7 +94,7 @@ def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recordi
     noisy = runner.simulate(model, noise_seed=NOISE_SEED)
     if noisy is not None:
         add_closed_loop_noise(data, sims, noisy)
-    if any(finer_discretisation(data.rig, scenario_from_recording(r, data.rig), FINER) for r in data.recordings):
+    if runner.refinable(FINER):
         say("noise", f"simulating the refit model {FINER} x finer (segments, step): what our own discretisation leaves")
         finer = runner.simulate(model, finer=FINER)
         if finer is not None:

@@ -22,7 +22,7 @@ import numpy as np
 from ..engine import SimulationError
 from ..interrupts import stop_pool, worker_init
 from ..recording import Recording
-from ..resim import resimulate_many
+from ..resim import finer_discretisation, resimulate_many, scenario_from_recording
 from .data import Data, Model, in_part, residual_vector
 
 log = logging.getLogger(__name__)
@@ -80,8 +80,8 @@ def _pieces(jobs: list[tuple], nthread: int = 1) -> list[np.ndarray | None]:
     finer: resim.finer_discretisation's factor), all simulated in lockstep; None for a job whose simulation diverged."""
     todo = [k for k, (_m, i, part, _u, _f) in enumerate(jobs) if in_part(_DATA.train[i], part).any()]
     sims = resimulate_many([(_DATA.recordings[jobs[k][1]], jobs[k][0].effects, jobs[k][0].parameters,
-                             last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]), None, jobs[k][4])
-                            for k in todo], nthread, _DATA.rig)
+                             last_time(_DATA.recordings[jobs[k][1]], _DATA.train[jobs[k][1]], jobs[k][2]), None,
+                             jobs[k][4]) for k in todo], nthread, _DATA.rig)
     out: list = [np.zeros(0)] * len(jobs)
     for k, sim in zip(todo, sims):
         _m, i, part, unit, _f = jobs[k]
@@ -126,13 +126,19 @@ class Runner:
             self.jobs_done(done, len(jobs))
         return [f.result() for f in futures]
 
-    def simulate(self, model: Model, noise_seed: int | None = None, finer: int = 1) -> list[Recording] | None:
+    def refinable(self, factor: float) -> bool:
+        """Whether simulating `factor` x finer (below 1: coarser) changes the model of some recording: its
+        segments or its step (resim.finer_discretisation)."""
+        return any(finer_discretisation(self.data.rig, scenario_from_recording(r, self.data.rig), factor)
+                   for r in self.data.recordings)
+
+    def simulate(self, model: Model, noise_seed: int | None = None, finer: float = 1) -> list[Recording] | None:
         """Every recording re-simulated with `model` (in lockstep; with `noise_seed` the rig's
         measurement noise on; `finer` x finer segments and step, resim.finer_discretisation); None if
         one diverged."""
         return self.simulate_seeds(model, [noise_seed], finer)[0]
 
-    def simulate_seeds(self, model: Model, seeds: list[int | None], finer: int = 1) -> list[list[Recording] | None]:
+    def simulate_seeds(self, model: Model, seeds: list[int | None], finer: float = 1) -> list[list[Recording] | None]:
         """`simulate` once per noise seed (None: noise off), all in one lockstep call."""
         return self._simulate_each([(model, seed) for seed in seeds], finer)
 
@@ -140,7 +146,7 @@ class Runner:
         """`simulate` for each model (noise off), all in one lockstep call."""
         return self._simulate_each([(model, None) for model in models])
 
-    def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: int = 1) -> list[list[Recording] | None]:
+    def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: float = 1) -> list[list[Recording] | None]:
         n = len(self.data.recordings)
         sims = self.lockstep(_simulate_some, [(model, i, seed, finer) for model, seed in runs for i in range(n)])
         return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]

@@ -2,10 +2,10 @@
 
 Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings
 can show (`excited`). `signatures` simulates each once per parameter (and probe level) around the
-current model, half as fine as the model (SCREEN_FINER); `screen` scores each by how much of the training residual its signature explains beyond
-refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate
-as its start; `rescreen` checks the best by simulation at that estimate; `shortlist` names the candidates to
-fit in full (effect_fit.fit_candidate).
+current model, half as fine as the model (SCREEN_FINER); `screen` scores each by how much of the training
+residual its signature explains beyond refitting the rig's parameters and the effects found so far
+(`with_findings`), and keeps that linear estimate as its start; `rescreen` checks the best by simulation at
+that estimate; `shortlist` names the candidates to fit in full (effect_fit.fit_candidate).
 """
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..recording import Recording
-from ..resim import finer_discretisation, scenario_from_recording
 from .data import Data, Model, STRIDE, scale_of
 from .fitting import Slot, effect_slots_of, jacobian, refit_cost, value_of
 from .runner import evaluator
@@ -206,7 +205,7 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
     if not jobs:
         return
     full = evaluator(runner)
-    coarse = [] if not coarser(data) else evaluator(runner, finer=SCREEN_FINER)([base] + jobs)
+    coarse = evaluator(runner, finer=SCREEN_FINER)([base] + jobs) if runner.refinable(SCREEN_FINER) else []
     if coarse and coarse[0] is not None:
         runs, against = coarse[1:], [coarse[0]] * len(jobs)
     else:
@@ -219,11 +218,6 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
             continue  # this probe diverges: no signature at this level
         step = 1.0 if name == "switch" else cand.probe(name, level) - cand.neutral[name]
         cand.signature.setdefault(level, {})[name] = (r - r_base) / step
-
-
-def coarser(data: Data) -> bool:
-    """Whether the rig's model has a coarser discretisation for the signatures (SCREEN_FINER): segments or a step."""
-    return any(finer_discretisation(data.rig, scenario_from_recording(r, data.rig), SCREEN_FINER) for r in data.recordings)
 
 
 def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: np.ndarray, r0: np.ndarray) -> None:
@@ -289,7 +283,8 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     rig's parameters and the findings so far, as in `screen`) are re-optimised to first order (`refit_cost`).
     A signature is a slope at its probe and the rig's parameters absorb part of an effect in the refit: a
     Watflex link's stiffness screened at 14 % and, at its estimate, made the residual 2.2 x worse; the 0.33 kg
-    payload that was there screened at 12 % with an estimate of 0.08 kg and was not fitted. A quantised parameter keeps its step search.
+    payload that was there screened at 12 % with an estimate of 0.08 kg and was not fitted. A quantised
+    parameter keeps its step search.
     Where the gain at the estimate beats the gain half-way, the estimate is moved on to twice its distance from
     neutral (`further`), at most FURTHER_STEPS times while that gains more; `checked` and `estimate` follow
     (seed 46, a laser beam 0.26 x as stiff as the datasheet: estimated at 0.43 x, simulated at 26 %, behind
