@@ -3,11 +3,11 @@ tolerances, and what noise and our own discretisation leave.
 
 Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), refits the rig's
 parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
-is near the noise but short of it) and keeps the refit only if validation is no worse; it returns the
-nominal and refit models' simulations, the rig's live slots and their Jacobian columns (spread units, for
-the screening), and marks idle parameters in `data.idle`. `calibrate_noise` adds to `data` what the rig's
-noise leaves in closed loop and what a finer discretisation changes. `final_refit` refits a chosen model's
-parameters on all the data.
+is near the noise but short of it, until training and validation are within it) and keeps the refit only
+if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
+their Jacobian columns (spread units, for the screening), and marks idle parameters in `data.idle`.
+`calibrate_noise` adds to `data` what the rig's noise leaves in closed loop and what a finer
+discretisation changes. `final_refit` refits a chosen model's parameters on all the data.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_sl
 from .refine import POLISH_ITERATIONS
 from .runner import Runner, evaluator, in_units
 from .uncertainty import FINER, NOISE_SEED
-from .validate import NOISE_MARGIN, within
+from .validate import NOISE_MARGIN, within, within_noise
 
 REFIT_ITERATIONS = 8
 COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
@@ -78,9 +78,17 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     if free and sims is not None and compass_worth(fit_scores(data, sims, "train")):
         say("refit", "the refit is short of the noise: a pattern search over the same parameters (stick-slip makes "
             "the cost rough)")
+        checked = {}
+
+        def within_both(model: Model) -> bool:
+            """The verdict's own test on training and validation data: once it holds, a lower cost changes no verdict."""
+            checked.update(model=model, sims=runner.simulate(model))
+            return checked["sims"] is not None and within_noise(fit_scores(data, checked["sims"], "train"),
+                                                                fit_scores(data, checked["sims"], "held_out"))
         current = compass(evaluate, current, free, [value_of(current, s) for s in free],
-                          residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION)
-        sims = runner.simulate(current)
+                          residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION,
+                          enough=within_both)
+        sims = checked["sims"] if checked.get("model") is current else runner.simulate(current)
     rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
