@@ -305,6 +305,26 @@ def test_the_compass_stops_where_no_step_could_make_a_move():
     assert found.parameters["a"] == 0.5 and calls == [1, 2]
 
 
+def test_a_slot_at_its_bound_does_not_hold_the_compass():
+    """A slot at its bound steps one way only, and its cost changes in proportion to the step: a step inward that
+    loses loses less shorter, but never gains. Cost 10 (a + 0.5) with a at its bound 0: the step inward costs
+    0.5 x 100 x (1.0^2 - 0.5^2) = 37.5 more; one sweep, where halving until that change fell below the resolution
+    took 7 (seed 56's laser tip-sensor gain x1.081 case, all five rig parameters at their bounds: 186 -> 78
+    simulations in its refit, the same refit)."""
+    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.refit import CHI2_RESOLUTION
+
+    calls = []
+
+    def evaluate(models):
+        calls.append(len(models))
+        return [np.array([10.0 * (m.parameters["a"] + 0.5)]) for m in models]
+
+    slot, start = [Slot(("param", "a"), 0.0, 2.0)], Model(parameters={"a": 0.0})
+    found = compass(evaluate, start, slot, [0.0], evaluate([start])[0], 14, resolution=CHI2_RESOLUTION)
+    assert found.parameters["a"] == 0.0 and calls == [1, 1]
+
+
 def test_the_compass_stops_at_the_first_move_that_is_enough():
     """refit_nominal's pattern search stops once the verdict's own test holds (`enough`; in the clean Watflex
     cases of seeds 55-56 training and validation were within the noise after its first one or two moves and

@@ -221,27 +221,34 @@ def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps:
     units, one unit of chi-square) it stops earlier, once no step changes the cost by that much or by
     what a move must gain: smaller steps would change it less still (far from the noise, where missing
     physics holds the cost up, the 0.1 % decides: a laser arm with its actuator gain x1.1 searched 11
-    sweeps, 231 simulations, for a 0.3 % lower cost found in the first two). With `enough(model)` it
-    stops at the first move to a model for which that holds (and returns that very object)."""
+    sweeps, 231 simulations, for a 0.3 % lower cost found in the first two); a slot at its bound, which
+    steps one way only, does not hold it. With `enough(model)` it stops at the first move to a model for
+    which that holds (and returns that very object)."""
     u, lo, hi = internal_start(free, x0)
     k = huber_threshold(r0)
     cost, step = huber_cost(r0, k), first_step * (hi - lo)
     for _ in range(sweeps):
-        trials = []
+        trials, both_ways = [], []
         for i in range(len(free)):
+            moves = []
             for sign in (1.0, -1.0):
                 v = u.copy()
                 v[i] = np.clip(v[i] + sign * step[i], lo[i], hi[i])
                 if v[i] != u[i]:
-                    trials.append(v)
+                    moves.append(v)
+            trials += moves
+            both_ways += [len(moves) == 2] * len(moves)
         costs = [math.inf if r is None else huber_cost(r, k)
                  for r in evaluate([at_internal(v, free, base) for v in trials])]
         best = int(np.argmin(costs)) if costs else -1
+        # a slot at a bound steps one way only: its cost changes in proportion to the step, to first order,
+        # so a step that gained too little, or lost, does no better shorter; it does not hold the search
+        moving = max((abs(c - cost) for c, two in zip(costs, both_ways) if two), default=0.0)
         if best >= 0 and costs[best] < cost * (1 - COMPASS_GAIN):
             u, cost = trials[best], costs[best]
             if enough is not None and enough(moved := at_internal(u, free, base)):
                 return moved
-        elif resolution is not None and max((abs(c - cost) for c in costs), default=0.0) < max(resolution, COMPASS_GAIN * cost):
+        elif resolution is not None and moving < max(resolution, COMPASS_GAIN * cost):
             break
         else:
             step = step / 2
