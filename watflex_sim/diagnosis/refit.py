@@ -26,7 +26,8 @@ from .validate import NOISE_MARGIN, within, within_noise
 
 REFIT_ITERATIONS = 8
 COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
-# per parameter each); it stops once no step changes the cost by CHI2_RESOLUTION (6 sweeps halved the steps to
+# per parameter each); it stops once training and validation are within the noise, or once no step changes the
+# cost by CHI2_RESOLUTION or by what a move must gain (fitting.compass; 6 sweeps halved the steps to
 # 0.4 % of a tolerance at best: a clean Watflex case's strain bridge is 1.3 x its noise at link 2's EI 0.04 % off)
 COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise gets the pattern search; one further
 # off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
