@@ -89,7 +89,8 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
         current = compass(evaluate, current, free, [value_of(current, s) for s in free],
                           residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION,
                           enough=within_both)
-        sims = checked["sims"] if checked.get("model") is current else runner.simulate(current)
+        # the last move judged is where the search ended unless a later move followed: its simulations serve
+        sims = checked["sims"] if checked.get("model") == current else runner.simulate(current)
     rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
