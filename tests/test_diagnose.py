@@ -147,6 +147,54 @@ def test_screening_ranks_the_signature_the_residual_carries():
     assert cands[0].estimate["k"] == pytest.approx(0.7, rel=0.05)
 
 
+def test_a_ripple_is_screened_in_quadrature_at_several_periods():
+    """probes(): a ripple a sin(2 pi x / period + phase) is probed at each of its screened periods at its start
+    amplitude, at phase 0 and pi/2; screen(): at a given period it is linear in (a sin, b cos), so a residual that is
+    a ripple of 0.4 at the second period and phase -1.2 rad (with noise) is estimated there at 0.4 (+-5 %) and
+    -1.2 rad (+-0.05), where the start's phase-0 sine (seed 57: a cosine-like Watflex ripple) explains little."""
+    from watflex_sim.diagnosis import Candidate, Slot, screen
+
+    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -0.5, 0.5), "period": Slot(("effect", -1, "period"), 0.2, 200.0, True),
+             "phase": Slot(("effect", -1, "phase"), -math.pi, math.pi), "spring": Slot(("effect", -1, "spring"), -5.0, 5.0)}
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 0.1, "period": 3.0, "phase": 0.0, "spring": 0.0},
+                     slots, {"amplitude": 0.0, "spring": 0.0}, periodic="period", periods=(1.0, 0.5))
+    assert cand.probes()[(("period", 0.5), "quadrature")] == {"amplitude": 0.1, "period": 0.5, "phase": math.pi / 2, "spring": 0.0}
+    x = np.linspace(0.0, 1.0, 400)  # the joint's position over the residual's samples
+    wave = lambda period, phase: np.sin(2 * math.pi * x / period + phase)  # noqa: E731
+    cand.signature = {1.0: {"amplitude": -wave(3.0, 0.0), "spring": -x}}
+    cand.signature |= {("period", p): {"amplitude": -wave(p, 0.0), "quadrature": -wave(p, math.pi / 2)} for p in cand.periods}
+    r0 = 0.4 * wave(0.5, -1.2) + 0.01 * np.random.default_rng(2).normal(size=x.size)
+    screen([cand], np.zeros((x.size, 0)), [], np.zeros(0), r0)
+    assert cand.gain > 0.95
+    assert cand.estimate["period"] == 0.5
+    assert cand.estimate["amplitude"] == pytest.approx(0.4, rel=0.05)
+    assert cand.estimate["phase"] == pytest.approx(-1.2, abs=0.05)
+
+
+def test_concealed_names_what_the_datasheet_models_residual_carries():
+    """concealed(): where the refit took an effect up, the refit model's residual carries B's signature best but the
+    nominal model's carries A's (0.7 x A's signature, noise and a rig-parameter column): A is returned, its own
+    screening left as it was; None when the shortlist lists A already or when nothing screens at MIN_GAIN per
+    parameter (seed 57: a joint compliance the refit took up into a link stiffness)."""
+    from watflex_sim.diagnosis import Candidate, MIN_GAIN, Slot, concealed
+
+    rng = np.random.default_rng(1)
+    n = 400
+    rig = rng.normal(size=(n, 1))
+    sig_a, sig_b = np.sin(np.linspace(0, 9, n)), np.cos(np.linspace(0, 31, n))
+    r_nominal = 0.7 * sig_a + 0.02 * rig[:, 0] + 0.01 * rng.normal(size=n)
+    cands = [Candidate(name, "x", {"k": 0.1}, {"k": Slot(("effect", -1, "k"), 0.0, 2.0)}, {"k": 0.0},
+                       signature={1.0: {"k": -sig}}, gain=gain) for name, sig, gain in (("A", sig_a, 0.08), ("B", sig_b, 0.2))]
+    slots, at = [Slot(("param", "p"), 0.95, 1.05)], np.array([1.0])
+    assert concealed(cands, rig, slots, at, r_nominal, [cands[1]]) is cands[0]
+    assert cands[0].gain == 0.08 and cands[0].estimate == {}  # the refit model's screening stands
+    assert concealed(cands, rig, slots, at, r_nominal, [cands[0], cands[1]]) is None
+    noise = rng.normal(size=n)  # A's signature explains ~1/n of white noise
+    assert concealed(cands, rig, slots, at, noise, [cands[1]]) is None
+    assert concealed(cands, rig, slots, at, noise + 2 * MIN_GAIN ** 0.5 * np.linalg.norm(noise) / np.linalg.norm(sig_a) * sig_a,
+                     [cands[1]]) is cands[0]  # ~2 x MIN_GAIN of the cost
+
+
 def test_blind_laser_diagnosis_names_coulomb_friction_whatever_the_file_order(tmp_path):
     """End to end on 1.2 s recordings made with 0.6 / 0.3 N m hub friction and noise (both step
     directions, 1.15 kg), plus a last recording at rest in which nothing moves (issue 14: the old

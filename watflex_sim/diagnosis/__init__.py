@@ -23,11 +23,11 @@ from .fitting import Slot, intervals, levenberg, refit_parameters
 from .locate import locate
 from .pipeline import diagnose
 from .runner import simulate_all
-from .screening import MIN_GAIN, Candidate, screen, shortlist
+from .screening import MIN_GAIN, Candidate, concealed, screen, shortlist
 from .validate import MIN_HELD_GAIN, NOISE_MARGIN
 
 __all__ = [
-    "Candidate", "Data", "MIN_GAIN", "MIN_HELD_GAIN", "Model", "NOISE_MARGIN", "Slot", "diagnose", "fit_scores",
-    "intervals", "levenberg", "locate", "motion_channel", "noise_nrmse", "noise_ratio", "prepare",
+    "Candidate", "Data", "MIN_GAIN", "MIN_HELD_GAIN", "Model", "NOISE_MARGIN", "Slot", "concealed", "diagnose",
+    "fit_scores", "intervals", "levenberg", "locate", "motion_channel", "noise_nrmse", "noise_ratio", "prepare",
     "refit_parameters", "residual_vector", "scale_of", "screen", "shortlist", "simulate_all", "step_search",
 ]

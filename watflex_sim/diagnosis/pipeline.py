@@ -26,8 +26,8 @@ from .locate import locate
 from .refine import alternative_entry, offset_alternative, polish, single_from_pair
 from .refit import calibrate_noise, final_refit, refit_nominal
 from .runner import Runner, evaluator
-from .screening import (RESCREEN, SCREEN_TOP, candidates, make_candidate, rescreen, screen, shortlist, signatures,
-                        with_findings)
+from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
+                        signatures, with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
 from .uncertainty import final_intervals
 from .validate import (NOISE_MARGIN, earns_place, eliminate, explained_share, gains, shortfall, vague_findings, verdict_of,
@@ -117,10 +117,16 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         screened_report.append([{"effect": c.effect, "where": c.where, "explained": round(c.gain, 4)}
                                 | ({} if c.checked is None else {"simulated": round(c.checked, 4)}) for c in live[:8]])
         top = shortlist(live, screen_top)
+        hidden = None
+        if round_ == 1 and not beyond and current.parameters:  # what the refit may have taken up
+            hidden = concealed(live, columns, slots, np.array([value_of(nominal, s) for s in free]),
+                               residual_vector(data, sims_nominal), top)
+            top += [hidden] if hidden else []
         if not top:
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
-            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top))
+            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top if c is not hidden)
+            + (f", and {hidden.effect}@{hidden.where}, which best explains the datasheet model's residual" if hidden else ""))
         results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [gains(scored(data, r, r["sims"]), train, held) for r in results if "error" not in r]
