@@ -130,18 +130,28 @@ def test_levenberg_recovers_bounded_parameters_of_a_nonlinear_residual():
     assert model.parameters["b"] == pytest.approx(50.0, rel=1e-3)
 
 
-def test_screening_ranks_the_signature_the_residual_carries():
-    """screen(): a residual made of 0.7 x candidate A's signature plus a rig-parameter column
-    and noise ranks A above B (orthogonal to it) and estimates A's parameter at 0.7 (+-5 %)."""
-    from watflex_sim.diagnosis import Candidate, Slot, screen
+def _two_candidates(seed: int, gains=(0.0, 0.0)):
+    """Candidates A and B of one parameter each with orthogonal signatures (their screening gains `gains`), a
+    rig-parameter column, and a residual of 0.7 x A's signature, a little of the rig's column and noise:
+    (rig columns, [A, B], residual, A's signature)."""
+    from watflex_sim.diagnosis import Candidate, Slot
 
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     n = 400
     rig = rng.normal(size=(n, 1))
     sig_a, sig_b = np.sin(np.linspace(0, 9, n)), np.cos(np.linspace(0, 31, n))
-    r0 = 0.7 * sig_a + 0.02 * rig[:, 0] + 0.01 * rng.normal(size=n)
+    r = 0.7 * sig_a + 0.02 * rig[:, 0] + 0.01 * rng.normal(size=n)
     cands = [Candidate(name, "x", {"k": 0.1}, {"k": Slot(("effect", -1, "k"), 0.0, 2.0)}, {"k": 0.0},
-                       signature={1.0: {"k": -sig}}) for name, sig in (("A", sig_a), ("B", sig_b))]
+                       signature={1.0: {"k": -sig}}, gain=gain) for name, sig, gain in (("A", sig_a, gains[0]), ("B", sig_b, gains[1]))]
+    return rig, cands, r, sig_a
+
+
+def test_screening_ranks_the_signature_the_residual_carries():
+    """screen(): a residual made of 0.7 x candidate A's signature plus a rig-parameter column
+    and noise ranks A above B (orthogonal to it) and estimates A's parameter at 0.7 (+-5 %)."""
+    from watflex_sim.diagnosis import Slot, screen
+
+    rig, cands, r0, _ = _two_candidates(seed=0)
     screen(cands, rig, [Slot(("param", "p"), 0.95, 1.05)], np.array([1.0]), r0)
     assert cands[0].gain > 0.9 > 0.1 > cands[1].gain
     assert cands[0].estimate["k"] == pytest.approx(0.7, rel=0.05)
@@ -176,23 +186,18 @@ def test_concealed_names_what_the_datasheet_models_residual_carries():
     nominal model's carries A's (0.7 x A's signature, noise and a rig-parameter column): A is returned, its own
     screening left as it was; None when the shortlist lists A already or when nothing screens at MIN_GAIN per
     parameter (seed 57: a joint compliance the refit took up into a link stiffness)."""
-    from watflex_sim.diagnosis import Candidate, MIN_GAIN, Slot, concealed
+    from watflex_sim.diagnosis import MIN_GAIN, Slot, concealed
 
-    rng = np.random.default_rng(1)
-    n = 400
-    rig = rng.normal(size=(n, 1))
-    sig_a, sig_b = np.sin(np.linspace(0, 9, n)), np.cos(np.linspace(0, 31, n))
-    r_nominal = 0.7 * sig_a + 0.02 * rig[:, 0] + 0.01 * rng.normal(size=n)
-    cands = [Candidate(name, "x", {"k": 0.1}, {"k": Slot(("effect", -1, "k"), 0.0, 2.0)}, {"k": 0.0},
-                       signature={1.0: {"k": -sig}}, gain=gain) for name, sig, gain in (("A", sig_a, 0.08), ("B", sig_b, 0.2))]
+    rig, cands, r_nominal, sig_a = _two_candidates(seed=1, gains=(0.08, 0.2))
+    n = sig_a.size
     slots, at = [Slot(("param", "p"), 0.95, 1.05)], np.array([1.0])
     assert concealed(cands, rig, slots, at, r_nominal, [cands[1]]) is cands[0]
     assert cands[0].gain == 0.08 and cands[0].estimate == {}  # the refit model's screening stands
     assert concealed(cands, rig, slots, at, r_nominal, [cands[0], cands[1]]) is None
-    noise = rng.normal(size=n)  # A's signature explains ~1/n of white noise
+    noise = np.random.default_rng(2).normal(size=n)  # A's signature explains ~1/n of white noise
     assert concealed(cands, rig, slots, at, noise, [cands[1]]) is None
     assert concealed(cands, rig, slots, at, noise + 2 * MIN_GAIN ** 0.5 * np.linalg.norm(noise) / np.linalg.norm(sig_a) * sig_a,
-                     [cands[1]]) is cands[0]  # ~2 x MIN_GAIN of the cost
+                     [cands[1]]) is cands[0]  # 4 MIN_GAIN / (1 + 4 MIN_GAIN) of the cost
 
 
 def test_blind_laser_diagnosis_names_coulomb_friction_whatever_the_file_order(tmp_path):
