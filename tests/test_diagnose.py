@@ -142,7 +142,8 @@ def _two_candidates(seed: int, gains=(0.0, 0.0)):
     sig_a, sig_b = np.sin(np.linspace(0, 9, n)), np.cos(np.linspace(0, 31, n))
     r = 0.7 * sig_a + 0.02 * rig[:, 0] + 0.01 * rng.normal(size=n)
     cands = [Candidate(name, "x", {"k": 0.1}, {"k": Slot(("effect", -1, "k"), 0.0, 2.0)}, {"k": 0.0},
-                       signature={1.0: {"k": -sig}}, gain=gain) for name, sig, gain in (("A", sig_a, gains[0]), ("B", sig_b, gains[1]))]
+                       signature={1.0: {"k": -sig}}, gain=gain)
+             for name, sig, gain in (("A", sig_a, gains[0]), ("B", sig_b, gains[1]))]
     return rig, cands, r, sig_a
 
 
@@ -164,15 +165,18 @@ def test_a_ripple_is_screened_in_quadrature_at_several_periods():
     -1.2 rad (+-0.05), where the start's phase-0 sine (seed 57: a cosine-like Watflex ripple) explains little."""
     from watflex_sim.diagnosis import Candidate, Slot, screen
 
-    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -0.5, 0.5), "period": Slot(("effect", -1, "period"), 0.2, 200.0, True),
-             "phase": Slot(("effect", -1, "phase"), -math.pi, math.pi), "spring": Slot(("effect", -1, "spring"), -5.0, 5.0)}
-    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 0.1, "period": 3.0, "phase": 0.0, "spring": 0.0},
-                     slots, {"amplitude": 0.0, "spring": 0.0}, periodic="period", periods=(1.0, 0.5))
-    assert cand.probes()[(("period", 0.5), "quadrature")] == {"amplitude": 0.1, "period": 0.5, "phase": math.pi / 2, "spring": 0.0}
+    bounds = {"amplitude": (-0.5, 0.5, False), "period": (0.2, 200.0, True), "phase": (-math.pi, math.pi, False),
+              "spring": (-5.0, 5.0, False)}
+    slots = {name: Slot(("effect", -1, name), *bound) for name, bound in bounds.items()}
+    start = {"amplitude": 0.1, "period": 3.0, "phase": 0.0, "spring": 0.0}
+    cand = Candidate("position_dependent_friction", "elbow", start, slots, {"amplitude": 0.0, "spring": 0.0},
+                     periodic="period", periods=(1.0, 0.5))
+    assert cand.probes()[(("period", 0.5), "quadrature")] == {**start, "period": 0.5, "phase": math.pi / 2}
     x = np.linspace(0.0, 1.0, 400)  # the joint's position over the residual's samples
     wave = lambda period, phase: np.sin(2 * math.pi * x / period + phase)  # noqa: E731
     cand.signature = {1.0: {"amplitude": -wave(3.0, 0.0), "spring": -x}}
-    cand.signature |= {("period", p): {"amplitude": -wave(p, 0.0), "quadrature": -wave(p, math.pi / 2)} for p in cand.periods}
+    cand.signature |= {("period", p): {"amplitude": -wave(p, 0.0), "quadrature": -wave(p, math.pi / 2)}
+                       for p in cand.periods}
     r0 = 0.4 * wave(0.5, -1.2) + 0.01 * np.random.default_rng(2).normal(size=x.size)
     screen([cand], np.zeros((x.size, 0)), [], np.zeros(0), r0)
     assert cand.gain > 0.95
@@ -196,8 +200,8 @@ def test_concealed_names_what_the_datasheet_models_residual_carries():
     assert concealed(cands, rig, slots, at, r_nominal, [cands[0], cands[1]]) is None
     noise = np.random.default_rng(2).normal(size=n)  # A's signature explains ~1/n of white noise
     assert concealed(cands, rig, slots, at, noise, [cands[1]]) is None
-    assert concealed(cands, rig, slots, at, noise + 2 * MIN_GAIN ** 0.5 * np.linalg.norm(noise) / np.linalg.norm(sig_a) * sig_a,
-                     [cands[1]]) is cands[0]  # 4 MIN_GAIN / (1 + 4 MIN_GAIN) of the cost
+    some_a = 2 * MIN_GAIN ** 0.5 * np.linalg.norm(noise) / np.linalg.norm(sig_a) * sig_a  # 4 MIN_GAIN / (1 + 4 MIN_GAIN)
+    assert concealed(cands, rig, slots, at, noise + some_a, [cands[1]]) is cands[0]  # of the cost
 
 
 def test_blind_laser_diagnosis_names_coulomb_friction_whatever_the_file_order(tmp_path):

@@ -2,7 +2,8 @@
 
 Contract: `diagnose(recordings, names)` returns the report of recordings.md section 2 (plus 'sims' for
 plotting). Stages: re-simulate with the nominal model; refit the rig's parameters within tolerance
-(kept only if validation does not get worse); locate; rounds of screening, candidate fits and a polish
+(kept only if validation does not get worse); locate; rounds of screening, candidate fits (in the first round also
+the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
 validation by MIN_HELD_GAIN; backward elimination (a finding whose removal from the final model does
 not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
@@ -126,7 +127,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
             + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top if c is not hidden)
-            + (f", and {hidden.effect}@{hidden.where}, which best explains the datasheet model's residual" if hidden else ""))
+            + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else ""))
         results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [gains(scored(data, r, r["sims"]), train, held) for r in results if "error" not in r]

@@ -90,7 +90,8 @@ class Candidate:
             return {(level, "switch"): {**self.start, first: float(np.clip(self.start[first] * level, slot.low, slot.high))}
                     for level in levels}
         at_zero = {**self.start, **self.neutral}
-        probes = {(level, name): {**at_zero, name: self.probe(name, level)} for level in self.levels for name in self.neutral}
+        probes = {(level, name): {**at_zero, name: self.probe(name, level)}
+                  for level in self.levels for name in self.neutral}
         for period in self.periods:  # keyed ("period", its value): screened as a variant of its own, like a level
             for name, phase in (("amplitude", 0.0), (QUADRATURE, math.pi / 2)):
                 probes[(("period", period), name)] = {**at_zero, "amplitude": self.probe("amplitude"), "phase": phase,
