@@ -118,8 +118,7 @@ def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float]
 
     def as_values(p: float, x: np.ndarray) -> dict[str, float]:
         a, b = x[-2:]
-        return {**values, **dict(zip(others, map(float, x[:-2]))), period: p,
-                "amplitude": float(np.clip(math.hypot(a, b), amp.low, amp.high)), "phase": math.atan2(b, a)}
+        return {**values, **dict(zip(others, map(float, x[:-2]))), period: p, **cand.ripple(a, b)}
 
     start = np.array([cand.neutral[n] for n in others] + [0.0, 0.0])
     ranked = []

@@ -106,6 +106,11 @@ class Candidate:
             return self.probe("amplitude") - self.neutral["amplitude"]
         return self.probe(name, level) - self.neutral[name]
 
+    def ripple(self, a: float, b: float) -> dict[str, float]:
+        """A ripple's a sin + b cos (its amplitude's unit each) as its amplitude, within its slot, and phase (rad)."""
+        amp = self.slots["amplitude"]
+        return {"amplitude": float(np.clip(math.hypot(a, b), amp.low, amp.high)), "phase": math.atan2(b, a)}
+
     def probe(self, name: str, level: float = 1.0) -> float:
         """The value a neutral parameter is probed at: level x its start (or 2 % of its range)
         off neutral, within its bounds."""
@@ -129,10 +134,10 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
     if any(p.wide and p.log and p.neutral is not None for p in params):
         levels += (STIFFER_PROBE,)
     quanta = {p.name: p.quantum for p in params if p.quantum > 0}
-    periodic = next((p.name for p in params if p.periodic), "")
-    periods = ()
-    if periodic:  # its slot is in motion ranges
-        motion = scale_of(data, next(p for p in params if p.periodic), where)
+    ripple = next((p for p in params if p.periodic), None)
+    periodic, periods = (ripple.name if ripple else ""), ()
+    if ripple:  # its slot is in motion ranges
+        motion = scale_of(data, ripple, where)
         periods = tuple(motion / n for n in RIPPLE_CYCLES if slots[periodic].low <= motion / n <= slots[periodic].high)
     return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta, periodic=periodic, periods=periods)
 
@@ -279,9 +284,7 @@ def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: n
             coefficients = dict(zip(names, x[len(slots):]))
             if QUADRATURE in coefficients:  # a ripple at one period: a sin + b cos is an amplitude and a phase
                 a, b = coefficients.pop("amplitude"), coefficients.pop(QUADRATURE)
-                amp = cand.slots["amplitude"]
-                cand.estimate.update({cand.periodic: level[1], "phase": math.atan2(b, a),
-                                      "amplitude": float(np.clip(math.hypot(a, b), amp.low, amp.high))})
+                cand.estimate.update({cand.periodic: level[1], **cand.ripple(a, b)})
             for n, a in coefficients.items():
                 if n != "switch":
                     slot = cand.slots[n]
