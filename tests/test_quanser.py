@@ -152,11 +152,12 @@ def test_diagnosis_finds_the_soft_link_but_not_the_friction_at_drive_2():
     """`diagnose` on the fsf run (fitted) and the psf run (held out), both cropped to their first
     10 s to keep the test under a minute (45 s on 2 cores; the full runs give the same answer, README
     "A rig we did not build"). It finds link 2 softer than beam theory, near Quanser's own
-    torque-impulse value Ks2_exp = 2.5 N m/rad (config_2dslf.m; found 2.22, full runs 2.28), and
-    ranks a stop-short nonlinearity at drive 2 next but below the bar although the data show drive 2
-    sticking: dry friction (training 2.5 %, held-out 2.7 %) until d1d1747, backlash since (3.4 %, 2.7 %:
-    candidate fits carry on from a fresh Jacobian, and in round 2 a backlash fit got further than
-    the friction's). This test pins that disagreement, it does not endorse it."""
+    torque-impulse value Ks2_exp = 2.5 N m/rad (config_2dslf.m; found 2.50, full runs 2.46), and
+    ranks an effect at a drive next but below the bar although the data show drive 2 sticking: drive
+    2's dry friction (training 2.5 %, held-out 2.7 %) until d1d1747, its backlash (3.4 %, 2.7 %) until
+    each recording's split was salted with its content (2026-11-27), drive 1's joint compliance since
+    (23 % of the validation excess against the 25 % bar), as on the full runs (docs/rigs.md). This
+    test pins that disagreement, it does not endorse it."""
     from watflex_sim.diagnosis import diagnose
     from watflex_sim.recording import Recording
 
@@ -172,4 +173,5 @@ def test_diagnosis_finds_the_soft_link_but_not_the_friction_at_drive_2():
     assert ks2 == pytest.approx(2.5, rel=0.2)
     assert report["held_out"]["after"]["nrmse"] < 0.95 * report["held_out"]["before"]["nrmse"]
     best_rejected = report["rejected"][0]
-    assert best_rejected["where"] == "drive2" and best_rejected["effect"] in ("coulomb_friction", "stribeck_friction", "backlash")
+    assert best_rejected["where"] in ("drive1", "drive2") and best_rejected["effect"] in (
+        "coulomb_friction", "stribeck_friction", "backlash", "joint_compliance")
