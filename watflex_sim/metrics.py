@@ -37,16 +37,14 @@ def step_metrics(t: np.ndarray, y: np.ndarray, t_step: float, initial: float, fi
 
 def nrmse(measured: np.ndarray, simulated: np.ndarray) -> float:
     """RMS(measured - simulated) / RMS(measured - mean(measured)), NaN samples ignored (recordings.md); NaN
-    when the measured channel is constant, to within rounding (a quantised angle at rest: a spread of 4e-19
-    rad made a mean NRMSE 3.7e12)."""
+    when the measured channel is constant, as `correlation` tests it (np.ptp: the spread of identical values
+    computes to rounding error, 4e-19 rad for a quantised angle at rest, which made a mean NRMSE 3.7e12)."""
     m, s = np.asarray(measured, float), np.asarray(simulated, float)
     ok = np.isfinite(m) & np.isfinite(s)
     m, s = m[ok], s[ok]
-    if m.size == 0:
+    if m.size == 0 or np.ptp(m) == 0:
         return np.nan
-    spread = np.sqrt(np.mean((m - m.mean()) ** 2))
-    constant = spread <= 1e-12 * np.max(np.abs(m))
-    return np.nan if constant else float(np.sqrt(np.mean((m - s) ** 2)) / spread)
+    return float(np.sqrt(np.mean((m - s) ** 2)) / np.sqrt(np.mean((m - m.mean()) ** 2)))
 
 
 def correlation(measured: np.ndarray, simulated: np.ndarray) -> float:

@@ -112,11 +112,12 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     if len(rigs) != 1:
         raise ConfigError(f"recordings of different rigs in one diagnosis: {', '.join(sorted(rigs))}")
     rig = load_rig(rigs.pop())
-    order = sorted(range(len(recordings)), key=lambda i: (names[i], _fingerprint(recordings[i])))
-    recordings, names = [recordings[i] for i in order], [names[i] for i in order]
+    prints = [_fingerprint(r) for r in recordings]
+    order = sorted(range(len(recordings)), key=lambda i: (names[i], prints[i]))
+    recordings, names, prints = [recordings[i] for i in order], [names[i] for i in order], [prints[i] for i in order]
     outputs = set(rig.of_kind("measured"))
     channels, scale, noise, train, blocks = [], [], [], [], []
-    for rec, name in zip(recordings, names):
+    for rec, name, fingerprint in zip(recordings, names, prints):
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
@@ -130,7 +131,7 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         channels.append(chans)
         scale.append(spread)
         noise.append({c: max(declared[c], measured_noise(rec.channels[c])) or 1e-3 * spread[c] for c in chans})
-        mask, block = split_blocks(rec.time, int(_fingerprint(rec)[:8], 16))
+        mask, block = split_blocks(rec.time, int(fingerprint[:8], 16))
         train.append(mask)
         blocks.append(block)
     longer = any(r.time[-1] - r.time[0] > FIT_SECONDS for r in recordings)
