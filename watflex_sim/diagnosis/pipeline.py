@@ -31,8 +31,8 @@ from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candid
                         signatures, with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
 from .uncertainty import final_intervals
-from .validate import (NOISE_MARGIN, earns_place, eliminate, explained_share, gains, shortfall, vague_findings, verdict_of,
-                       verdict_reason, within_noise)
+from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, shortfall,
+                       vague_findings, verdict_of, verdict_reason, within_noise)
 
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
@@ -211,14 +211,15 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                   "ablated": ablated[i]["noise_ratio"], "held_without": ablated[i]["nrmse"]}
         findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
-    verdict = verdict_of(current, train_f, held_f, share)
+    curved = curved_channels(data, sims)
+    verdict = verdict_of(current, train_f, held_f, share, curved)
     alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
     report = {
         "format": "flexarm-diagnosis/1",
         "rig": data.rig.name,
         "recordings": data.names,
         "verdict": verdict,
-        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share),
+        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -243,6 +244,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if verdict == "unexplained":
         report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
                               "validation_noise_ratio": held_f["noise_ratio"], "candidates_tried": fitted_report,
+                              "curved_channels": curved,
                               "parameters_at_bounds": report["parameters_at_bounds"]}
     if propose and alternatives:
         from .experiment import propose_experiment
