@@ -123,7 +123,7 @@ def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
     return out
 
 
-def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict] = ()) -> str:
+def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict]) -> str:
     """The verdict for a final `model` whose fit_scores are `train` and `held` (validation), its findings
     removing `share` of validation's excess over the noise (explained_share), `curved` its curved_channels."""
     if curved:
@@ -134,7 +134,7 @@ def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list
 
 
 def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict] = ()) -> str:
+                   curved: list[dict]) -> str:
     worst = max((train, held), key=lambda s: s["worst_ratio"])
     now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
            f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
