@@ -102,8 +102,12 @@ def worker_init(initializer=None, *args) -> None:
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 1.0) -> None:
-    """Cancel queued jobs and end the pool's processes now (SIGTERM, then SIGKILL after `timeout_s`)."""
+    """Cancel queued jobs and end the pool's processes now (SIGTERM, then SIGKILL after `timeout_s`).
+
+    On return every future is done (cancelled, or failed with BrokenProcessPool): the pool's
+    manager thread, which settles the futures of jobs already handed to a worker, is joined."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     for p in processes:
         with contextlib.suppress(Exception):
             p.terminate()
@@ -114,3 +118,5 @@ def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 1.0) -> None:
             if p.is_alive():
                 p.kill()
                 p.join(timeout_s)
+    if manager is not None:
+        manager.join(timeout_s)
