@@ -273,3 +273,26 @@ def test_the_scorer_names_a_command_delay_where_the_report_does(bench):
     case = next(c for c in truth["cases"] if c["rig"] == "watflex" and c["effect"])
     recs = [read_recording(out / p) for p in case["recordings"]]
     assert sb.true_place({**case, "effect": "delay", "where": "command"}, recs) == "shoulder_torque_cmd+elbow_torque_cmd"
+
+
+def test_the_two_joint_setup_moves_both_joints_and_places_effects_on_the_shoulder(tmp_path):
+    """`--watflex-setup two_joint`: every allowed place is a place (the shoulder, link 1 and its bridges
+    included, which the single-link set-up never excites), the recordings are the observer control of
+    both joints (thesis 5.2.5) with both joints moving by 0.3-0.5 / 0.6-1.0 rad (the drawn steps' spans,
+    less 30 % for a 1.2 s recording's unfinished rise) and the link-1 bridges recorded; clean_rest's
+    last file moves neither joint (within 0.01 rad); the single-link set-up's keys are not touched."""
+    assert mb.places("watflex", "coulomb_friction", "two_joint") == ["shoulder", "elbow"]
+    assert "strain_1A" in mb.places("watflex", "sensor_gain", "two_joint")
+    truth = mb.make_cases(tmp_path, **dict(ARGS, rigs=("watflex",), effects=["coulomb_friction"], clean=0,
+                                           duration=1.2), hard=1, setup="two_joint")
+    assert truth["watflex_setup"] == "two_joint"
+    cases = {c["kind"]: c for c in truth["cases"]}
+    effect = cases["effect"]
+    recs = {Path(p).stem: read_recording(tmp_path / p) for p in effect["recordings"]}
+    assert sorted(recs) == ["two_joint_a", "two_joint_b", "two_joint_c"]
+    for rec in recs.values():
+        assert rec.meta["scenario"]["experiment"] == "watflex_observer_two_joint" and "strain_1A" in rec.channels
+        assert np.ptp(rec.channels["shoulder_angle"]) > 0.7 * 0.3 and np.ptp(rec.channels["elbow_angle"]) > 0.7 * 0.6
+    rest = read_recording(tmp_path / next(p for p in cases["clean_rest"]["recordings"] if "at_rest" in p))
+    assert np.ptp(rest.channels["shoulder_angle"]) < 0.01 and np.ptp(rest.channels["elbow_angle"]) < 0.01
+    assert mb._key("watflex", "two_joint", "clean/0") != mb._key("watflex", "single_link", "clean/0") == "watflex/clean/0"

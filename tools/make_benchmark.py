@@ -6,10 +6,13 @@ Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,wat
 A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
 rig with one catalogue effect added, listed in a shuffled order (the diagnosis must not depend on it):
   laser_arm: 2.5 mm tip step positive, negative (0.7 kg), then a step at another paper payload;
-  watflex (shoulder locked): elbow step +0.5 rad, -0.5 rad, then the 0.1 rad staircase.
-Each effect gets a place (`where`) the rig description allows, at random (Watflex: the places
-the elbow experiments excite: elbow-side ones, link 1 and its strain bridges 1A-1C, which the
-swinging elbow shakes), and a magnitude from RANGES: visible above the rig noise but modest.
+  watflex (shoulder locked): elbow step +0.5 rad, -0.5 rad, then the 0.1 rad staircase;
+  watflex with `--watflex-setup two_joint`: both links flexible, both joints moving: three steps of
+    the observer control of thesis 5.2.5 (shoulder +-0.3-0.5 rad, elbow +-0.6-1.0 rad, signs drawn).
+Each effect gets a place (`where`) the rig description allows, at random (Watflex single-link: the
+places the elbow experiments excite: elbow-side ones, link 1 and its strain bridges 1A-1C, which the
+swinging elbow shakes; two-joint: every place), and a magnitude from RANGES: visible above the rig
+noise but modest.
 One concealment per case (CONCEALMENTS). `--clean` cases per rig have no effect, only the
 rig's parameters perturbed within their tolerances. `--hard` cases per rig and kind (issue 14):
   clean_rest: clean, but the last experiment is one in which nothing moves (an uninformative file);
@@ -33,12 +36,13 @@ already hold a benchmark. Same seed, same arguments: byte-identical files.
 Skipped (SKIPPED, listed with the reason at the end of --help): laser_arm presliding and
 dwell_time_stiction (no nominal hub friction to act on), laser_arm structural_damping (does
 not show within the catalogue's bounds); Watflex places the locked-shoulder experiments do
-not excite (the shoulder, its angle and torque command, the elbow bearing); effects a rig
-description does not allow.
+not excite (the shoulder, its angle and torque command, the elbow bearing; the two-joint set-up
+excites them); effects a rig description does not allow.
 """
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import sys
@@ -142,6 +146,7 @@ DIRECTIONAL = {"coulomb_friction": ("torque_positive", "torque_negative"),
                "stribeck_friction": ("breakaway_positive", "breakaway_negative"),
                "viscous_friction": ("coefficient", "coefficient_negative")}
 HARD_KINDS = ("clean_rest", "out_of_tolerance", "outside_catalogue")
+WATFLEX_SETUPS = ("single_link", "two_joint")  # the elbow experiments (shoulder locked), or both joints moving
 MONITORED = {"laser_arm": "motor_current", "watflex": "strain_2B"}  # a sensor no controller reads
 STIFFNESS_PLACE = {"laser_arm": "beam", "watflex": "link2"}
 CONCEALMENTS = ("closed loop", "one direction only", "mixed with parameter error", "small against noise",
@@ -190,15 +195,18 @@ def perturbed_parameters(rig: str, rng: np.random.Generator) -> dict[str, float]
 
 
 def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: bool = False,
-                recorder: dict | None = None) -> list[tuple[str, dict]]:
+                recorder: dict | None = None, setup: str = "single_link") -> list[tuple[str, dict]]:
     """The three recordings of a case as (stem, scenario without effects); with `rest_last` the third is
-    an experiment in which nothing moves (laser: a zero step; Watflex: the sub-break-away triangle).
-    `recorder`: scenario keys of the simulator that records them (recorder_of)."""
+    an experiment in which nothing moves (laser: a zero step; Watflex: the sub-break-away triangle, or
+    two-joint steps of zero). `recorder`: scenario keys of the simulator that records them (recorder_of);
+    `setup`: the Watflex set-up (WATFLEX_SETUPS)."""
     if rig == "laser_arm":
         third = float(rng.choice([0.0, 1.15]))  # kg: a paper payload besides the 0.7 kg of the steps
         plan = [("step_positive", "positive", 0.7), ("step_negative", "negative", 0.7),
                 (f"step_payload_{third:g}kg", str(rng.choice(["positive", "negative"])), third)]
         runs = [(stem, load_scenario("laser_arm_step") | {"direction": d, "payload_kg": m}) for stem, d, m in plan]
+    elif setup == "two_joint":
+        runs = [(f"two_joint_{k}", two_joint_steps(*_signed(rng, (0.3, 0.5), (0.6, 1.0)), duration)) for k in "abc"]
     else:
         runs = []
         for stem, direction in (("step_positive", "positive"), ("step_negative", "negative")):
@@ -213,6 +221,8 @@ def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: 
         if rig == "laser_arm":
             sc = load_scenario("laser_arm_step") | {"payload_kg": 0.7}
             sc["reference"][0]["arc_m"] = 0.0
+        elif setup == "two_joint":
+            sc = two_joint_steps(0.0, 0.0, duration)
         else:
             sc = load_scenario("watflex_elbow_triangle")
         runs[-1] = ("at_rest", sc)
@@ -221,20 +231,34 @@ def experiments(rig: str, duration: float, rng: np.random.Generator, rest_last: 
     return runs
 
 
-def places(rig: str, effect: str) -> list[str]:
+def _signed(rng: np.random.Generator, *spans: tuple[float, float]) -> list[float]:
+    """One value drawn uniformly within each (low, high) span, each with a random sign."""
+    return [float(f"{rng.choice([-1.0, 1.0]) * rng.uniform(*span):.3g}") for span in spans]
+
+
+def two_joint_steps(shoulder: float, elbow: float, duration: float) -> dict:
+    """The observer control of both joints (scenario watflex_observer_two_joint), steps of `shoulder` and
+    `elbow` rad at min(0.5 s, duration / 5)."""
+    sc = copy.deepcopy(load_scenario("watflex_observer_two_joint"))
+    for ref, amplitude in zip(sc["reference"], (shoulder, elbow)):
+        ref.update(amplitude=amplitude, time_s=min(0.5, duration / 5))  # rad, s
+    return sc
+
+
+def places(rig: str, effect: str, setup: str = "single_link") -> list[str]:
     """Where `effect` may go on `rig`: allowed by the rig description, excited, not SKIPPED."""
     allowed = load_rig(rig).effects.get(effect, [])
-    excited = EXCITED.get(rig)
+    excited = EXCITED.get(rig) if setup == "single_link" else None
     return [w for w in allowed if (excited is None or w in excited) and (rig, effect, w) not in SKIPPED]
 
 
-def why_skipped(rig: str, effect: str) -> str | None:
-    """Why `effect` gets no case on `rig`, or None if it gets cases."""
+def why_skipped(rig: str, effect: str, setup: str = "single_link") -> str | None:
+    """Why `effect` gets no case on `rig` (in the Watflex `setup`), or None if it gets cases."""
     if (rig, effect) in SKIPPED:
         return SKIPPED[(rig, effect)]
     if effect not in load_rig(rig).effects:
         return "the rig description does not allow it"
-    if not places(rig, effect):
+    if not places(rig, effect, setup):
         return "no place the experiments excite"
     return None
 
@@ -278,23 +302,29 @@ def recorder_of(rig: str, segments: int = 0, step_divisor: int = 1) -> dict:
     return out
 
 
+def _key(rig: str, setup: str, rest: str) -> str:
+    """A case's key: its draws' seed and its id (the single-link set-up's as before the two-joint one)."""
+    return f"{rig}/{rest}" if rig != "watflex" or setup == "single_link" else f"{rig}/{setup}/{rest}"
+
+
 def make_case(rig: str, effect: str | None, k: int, seed: int, duration: float,
-              recorder: dict | None = None) -> tuple[dict, list] | None:
+              recorder: dict | None = None, setup: str = "single_link") -> tuple[dict, list] | None:
     """One case: (truth entry without recordings, [(stem, Recording)]), or None if it always diverged.
 
-    `effect` None: a clean case (rig parameters perturbed within tolerance only). `recorder`: recorder_of."""
-    key = f"{rig}/{effect or 'clean'}/{k}"
+    `effect` None: a clean case (rig parameters perturbed within tolerance only). `recorder`: recorder_of;
+    `setup`: the Watflex set-up (WATFLEX_SETUPS)."""
+    key = _key(rig, setup, f"{effect or 'clean'}/{k}")
     rng = _rng(seed, key)
     kind = effect if effect in HARD_KINDS else ("clean" if effect is None else "effect")
     truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, kind=kind, effect=effect, where=None,
                  parameters={}, units={}, refit_parameters={}, concealment=None, duration_s=float(duration))
-    runs = experiments(rig, duration, rng, rest_last=kind == "clean_rest", recorder=recorder)
+    runs = experiments(rig, duration, rng, rest_last=kind == "clean_rest", recorder=recorder, setup=setup)
     if kind in HARD_KINDS:
         return make_hard_case(truth, rig, kind, runs, rng)
     if effect is None:
         truth["refit_parameters"] = perturbed_parameters(rig, rng)
         return truth, simulate_case(runs, [], truth["refit_parameters"])
-    where = str(rng.choice(places(rig, effect)))
+    where = str(rng.choice(places(rig, effect, setup)))
     options = [c for c in CONCEALMENTS if c != "one direction only"
                and (c != "indirect channel" or (rig == "watflex" and where != "elbow_angle"))]
     one_side = effect in DIRECTIONAL and rng.random() < 0.5  # else 3 effects of ~35 would rarely get it
@@ -342,22 +372,22 @@ def make_hard_case(truth: dict, rig: str, kind: str, runs: list, rng: np.random.
 
 
 def make_pair_case(rig: str, effects: list[str], k: int, seed: int, duration: float,
-                   recorder: dict | None = None) -> tuple[dict, list] | None:
+                   recorder: dict | None = None, setup: str = "single_link") -> tuple[dict, list] | None:
     """A case with two different effects of `effects` (each where `places` allows, at a magnitude of its
     RANGES): (truth entry, [(stem, Recording)]), or None if the effects cannot be drawn or always diverge."""
-    key = f"{rig}/pair/{k}"
+    key = _key(rig, setup, f"pair/{k}")
     rng = _rng(seed, key)
-    usable = [e for e in effects if not why_skipped(rig, e)]
+    usable = [e for e in effects if not why_skipped(rig, e, setup)]
     if len(usable) < 2:
         return None
     truth = dict(id=f"{rig}-{zlib.crc32(f'{seed}/{key}'.encode()):08x}", rig=rig, kind="pair", effect=None, where=None,
                  parameters={}, units={}, refit_parameters={}, concealment="two effects", duration_s=float(duration))
-    runs = experiments(rig, duration, rng, recorder=recorder)
+    runs = experiments(rig, duration, rng, recorder=recorder, setup=setup)
     for _ in range(MAX_DRAWS):
         chosen = [str(e) for e in rng.choice(usable, size=2, replace=False)]
         entries = []
         for effect in chosen:
-            where = str(rng.choice(places(rig, effect)))
+            where = str(rng.choice(places(rig, effect, setup)))
             parameters = in_whole_quanta(effect, draw(_ranges(rig, effect, where), rng, small=False))
             entries.append(dict(effect=effect, where=where, parameters=parameters, units=_units(rig, effect, where)))
         try:
@@ -375,15 +405,16 @@ def make_pair_case(rig: str, effects: list[str], k: int, seed: int, duration: fl
 
 def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
                duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0,
-               segments: int = 0, step_divisor: int = 1, pairs: int = 0) -> dict:
+               segments: int = 0, step_divisor: int = 1, pairs: int = 0, setup: str = "single_link") -> dict:
     """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
-    `segments`, `step_divisor`: the recording simulator's discretisation (recorder_of; default ours).
+    `segments`, `step_divisor`: the recording simulator's discretisation (recorder_of; default ours);
+    `setup`: the Watflex set-up (WATFLEX_SETUPS).
 
     truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean, pair or one of
     HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
     "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s", and for a pair
     "others": [{"effect", "where", "parameters", "units"}]}],
-    "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}}. `effects` None: the whole catalogue.
+    "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}, "watflex_setup"}. `effects` None: the whole catalogue.
     """
     out = Path(out)
     if (out / "truth.json").exists() or (out / "cases").exists():
@@ -392,7 +423,7 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     plan, skipped = [], []
     for rig in rigs:
         for effect in effects:
-            why = why_skipped(rig, effect)
+            why = why_skipped(rig, effect, setup)
             if why:
                 skipped.append({"rig": rig, "effect": effect, "why": why})
             else:
@@ -404,8 +435,8 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     for n, (rig, effect, k) in enumerate(plan, 1):
         start = time.perf_counter()
         recorder = recorder_of(rig, segments, step_divisor)
-        made = (make_pair_case(rig, effects, k, seed, duration, recorder) if effect == "pair"
-                else make_case(rig, effect, k, seed, duration, recorder))
+        made = (make_pair_case(rig, effects, k, seed, duration, recorder, setup) if effect == "pair"
+                else make_case(rig, effect, k, seed, duration, recorder, setup))
         if made is None:
             skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
             continue
@@ -423,7 +454,7 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
              "concealment", "duration_s", "others")
     truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
              "cases": [{k: c[k] for k in order if k in c} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
-             "recorder": {"segments": segments, "step_divisor": step_divisor}}
+             "recorder": {"segments": segments, "step_divisor": step_divisor}, "watflex_setup": setup}
     (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
     return truth
 
@@ -450,6 +481,9 @@ def main(argv=None) -> int:
                              "would differ from ours (default 0: ours; the diagnosis is not told)")
     parser.add_argument("--step-divisor", type=int, default=1, metavar="K",
                         help="record with a physics step K x finer than ours (default 1)")
+    parser.add_argument("--watflex-setup", choices=WATFLEX_SETUPS, default="single_link",
+                        help="Watflex experiments: the elbow ones with the shoulder locked (default), or steps of "
+                             "both joints under observer control, both links flexible (two_joint; ~3x the cost)")
     args = parser.parse_args(argv)
     rigs = [r for r in args.rigs.split(",") if r]
     effects = [e for e in args.effects.split(",") if e] or None
@@ -467,7 +501,8 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     try:
         truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard,
-                           segments=args.segments, step_divisor=args.step_divisor, pairs=args.pairs)
+                           segments=args.segments, step_divisor=args.step_divisor, pairs=args.pairs,
+                           setup=args.watflex_setup)
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     for s in truth["skipped"]:
