@@ -1,5 +1,6 @@
 """The diagnosis' stages alone (issue 14), on inputs whose answer is known in closed form."""
 import math
+from unittest.mock import patch
 
 import numpy as np
 import pytest
@@ -293,7 +294,7 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
     plain gain error (x1.14) leaves more (1.35 x the noise) but is a line, not a curve; a frequency 2 % off (a dynamic misfit,
     its residual 90 degrees from the value, 1.89 x the noise) is not a curve either: neither is flagged."""
     from watflex_sim.diagnosis.data import Data
-    from watflex_sim.diagnosis.validate import CURVE_SHARE, CURVE_VARIANCE, curved_channels, verdict_of
+    from watflex_sim.diagnosis.validate import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels, verdict_of
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -318,6 +319,30 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
     assert check(1.14 * x, x) == []
     wave = 2.0 * np.sin(2 * np.pi * 0.7 * t)
     assert check(2.0 * np.sin(2 * np.pi * 0.714 * t), wave) == []
+    # half the curve (+25 % at the peak): its structured residual 0.3 of the noise, 0.09 noise variances, under
+    # CURVE_VARIANCE, but on white noise 6,000 samples make chance take 2 / 6,000 of it: F ~ 0.09 x 6,000 / 2 = 270
+    small = x * (1 + 0.25 * (x / 2.0) ** 2)
+    found = check(small, float(small @ x / (x @ x)) * x)
+    assert len(found) == 1 and found[0]["noise_ratio"] ** 2 - found[0]["with_curve"] ** 2 < CURVE_VARIANCE
+    assert found[0]["significance"] == pytest.approx(270, rel=0.25) and 270 > CURVE_SIGNIFICANCE
+    # no curve, the model exact, white noise: the significance is chance's, ~ Exp(1) (mean 1); never near 20
+    chance = []
+    for seed in range(40):
+        measured = wave + noise * np.random.default_rng(seed).normal(size=t.size)
+        data = Data([Recording(t, {"c": measured}, {})], ["a"], None, [["c"]], [{"c": 1.0}], [{"c": noise}],
+                    [split_blocks(t)[0]])
+        with patch.multiple("watflex_sim.diagnosis.validate", CURVE_SHARE=-1.0, CURVE_VARIANCE=-1.0):
+            chance.append(curved_channels(data, [Recording(t, {"c": wave}, {})])[0]["significance"])
+    assert np.mean(chance) == pytest.approx(1.0, abs=0.35) and max(chance) < CURVE_SIGNIFICANCE / 2
+
+
+def test_effective_samples_of_white_noise_and_of_a_smooth_misfit():
+    """White noise is worth its length (within 10 %); a 0.5 Hz sine sampled at 1 kHz for 6 s, a few per period."""
+    from watflex_sim.diagnosis.validate import effective_samples
+
+    t = np.arange(0.0, 6.0, 1e-3)  # s
+    assert effective_samples(np.random.default_rng(2).normal(size=t.size)) == pytest.approx(t.size, rel=0.1)
+    assert effective_samples(np.sin(2 * np.pi * 0.5 * t)) < 20
 
 
 def test_compass_search_crosses_a_rough_cost():
