@@ -164,7 +164,8 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
            f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
     if curved:
         return ("; ".join(f"{c['channel']}'s residual is a static curve of its own value: beyond a gain and an offset "
-                          f"({c['noise_ratio']:.2f} x its noise left), a cubic map takes {100 * c['share']:.0f} % of what is above "
+                          f"({c['noise_ratio']:.2f} x its noise left), a cubic map takes "
+                          + (f"{100 * c['share']:.0f} % of" if c["share"] < 1.0 else "all of") + " what is above "
                           f"the noise ({c['with_curve']:.2f} x left; {c['significance']:.0f} x what chance takes): a nonlinear "
                           "sensor or amplifier characteristic the catalogue "
                           "does not have" for c in curved)
