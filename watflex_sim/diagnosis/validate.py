@@ -113,7 +113,7 @@ def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
     from the line at the current's peaks. Of its 11 other cases scored, every channel at most 11.5 times chance but one:
     a laser pair's motor current left by Coulomb friction fitted for a Stribeck friction, 28.5 times chance at 67 % of
     the excess, but 0.010 noise variances, bending 1.3-2.2 noise sd."""
-    rows: dict[str, list[tuple[float, float]]] = {}
+    rows: dict[str, list[tuple[float, float, float, float]]] = {}  # line, curve (noise variances left), significance, bend
     for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
         for c in chans:
             ok = np.isfinite(sim.channels[c]) & np.isfinite(rec.channels[c])
@@ -131,7 +131,7 @@ def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
             rows.setdefault(c, []).append((rest + gain, rest, significance, float(np.max(np.abs(by_line - by_curve)))))
     out = []
     for c, values in rows.items():
-        line, curve, significance, bend = np.median(np.array(values), axis=0)  # variances left, in noise variances
+        line, curve, significance, bend = np.median(np.array(values), axis=0)
         share = (line - curve) / (line - 1.0) if line > 1.0 else 0.0
         small = significance >= CURVE_SIGNIFICANCE and bend >= CURVE_BEND
         if (line - curve >= CURVE_VARIANCE or small) and share >= CURVE_SHARE:
