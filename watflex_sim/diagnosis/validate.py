@@ -3,8 +3,9 @@
 Contract: a fitted candidate is scored by `gains` against the model before it (training and validation
 noise ratios, the share of validation's excess over the noise it removes); it earns its place (`shortfall`
 says why not) when training falls by MIN_GAIN per parameter and validation by MIN_HELD_GAIN, and a later
-finding also removes MIN_EXCESS_GAIN of what validation has above the noise. `eliminate` drops findings
-the final model does not need on validation data; `vague_findings` those the data do not tell from no effect.
+finding also removes MIN_EXCESS_GAIN of what validation has above the noise (with training already within the
+noise, removing MIN_EXCESS_GAIN of validation's excess without making training worse is enough). `eliminate`
+drops findings the final model does not need on validation data; `vague_findings` those the data do not tell from no effect.
 `verdict_of`: `nothing_missing` only when a model without findings is within NOISE_MARGIN x the noise on training
 AND validation data, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
 excess), `unexplained` otherwise, and whenever a channel's residual is a static curve of its own value
@@ -43,6 +44,7 @@ def gains(result: dict, train_now: dict, held_now: dict) -> dict:
     train_gain = (train_now["noise_ratio"] - result["train"]["noise_ratio"]) / train_now["noise_ratio"]
     held_gain = (held_now["noise_ratio"] - result["held_out"]["noise_ratio"]) / held_now["noise_ratio"]
     return {**result, "train_gain": train_gain, "held_gain": held_gain, "excess_gain": excess_gain(held_now, result["held_out"]),
+            "train_within": train_now["noise_ratio"] <= NOISE_MARGIN,
             "score": train_gain + held_gain - MIN_GAIN * result["n_params"]}
 
 
@@ -70,7 +72,15 @@ def shortfall(result: dict, later: bool) -> str:
     """Why a fitted candidate does not earn its place, in words, or "" if it does: training must be better
     by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one is in already) must
     also remove MIN_EXCESS_GAIN of what validation still has above the noise (excess_gain), so a second
-    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate)."""
+    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate).
+    Training already within NOISE_MARGIN x the noise (`train_within`) has little left to gain: a candidate that
+    removes MIN_EXCESS_GAIN of validation's excess (and MIN_HELD_GAIN of its ratio) without making training
+    worse earns its place too. Seed 59's laser_arm-7cf6ef08: a beam 0.64 x as stiff, training at 0.86 x,
+    validation (which held most of the steps' fast parts) at 1.48 x; the stiffness fitted on training took
+    validation to 0.88 x but training by 0.5 % only: it was rejected and the verdict was `unexplained`."""
+    if (result.get("train_within") and result["train_gain"] >= 0.0 and result["held_gain"] >= MIN_HELD_GAIN
+            and result["excess_gain"] >= MIN_EXCESS_GAIN):
+        return ""
     if result["train_gain"] < MIN_GAIN * result["n_params"] or result["held_gain"] < MIN_HELD_GAIN:
         return "less than its parameters' cost"
     if later and result["excess_gain"] < MIN_EXCESS_GAIN:
