@@ -1141,3 +1141,25 @@ def test_the_candidate_fits_simulations_go_together_call_by_call():
     for t in threads:
         t.join(5)
     assert sorted(errors) == [(0, "worker failed"), (1, "worker failed")]
+
+
+def test_motion_is_the_reference_where_no_measured_joint_moves():
+    """motion_channel(): seed 59's watflex-1e32daae (single-link set-up, shoulder locked, the elbow encoder
+    left out: seen through the strains only) had every residual window labelled "near zero velocity
+    (shoulder_angle at rest)", read off the locked shoulder's encoder. With no measured position moving a
+    tenth as far as a reference, the moving reference is the motion: a 0.5 rad elbow step at 1 s moves
+    "positive" during its rise, and rests after it. With the elbow encoder there, the encoder is."""
+    from watflex_sim.diagnosis.data import motion_channel
+    from watflex_sim.diagnosis.locate import regimes
+    from watflex_sim.recording import Recording
+    from watflex_sim.rigdesc import load_rig
+
+    rig = load_rig("watflex")
+    t = np.arange(0.0, 3.0, 0.001)
+    step = 0.5 * np.clip((t - 1.0) / 0.2, 0.0, 1.0)  # rad, a 0.2 s ramp from 1 s
+    channels = {"shoulder_reference": 0 * t, "elbow_reference": step, "shoulder_angle": 1e-6 * np.sin(t)}
+    rec = Recording(t, channels, {})
+    assert motion_channel(rec, rig) == "elbow_reference"
+    assert regimes(rec, rig, 1050, 1150).startswith("positive motion")
+    assert regimes(rec, rig, 2000, 2100).startswith("near zero velocity (elbow_reference at rest)")
+    assert motion_channel(Recording(t, {**channels, "elbow_angle": 0.98 * step}, {}), rig) == "elbow_angle"

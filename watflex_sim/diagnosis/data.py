@@ -314,10 +314,17 @@ def peak(x: np.ndarray) -> float:
 
 
 def motion_channel(rec: Recording, rig: RigDescription) -> str | None:
-    """The measured joint position (rad or m) that moves most in the recording: what 'motion' means."""
-    positions = [c for c in rig.of_kind("measured") if c in rec.channels
-                 and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")]
-    return max(positions, key=lambda c: float(np.nanstd(rec.channels[c])), default=None)
+    """The joint position (rad or m) that moves most in the recording: what 'motion' means. A measured one,
+    unless none moves a tenth as far as a reference does (a locked joint's encoder, the moving joint's left
+    out: a rig seen through its strains only); then the reference."""
+    def spread(kind: str) -> dict[str, float]:
+        return {c: float(np.nanstd(rec.channels[c])) for c in rig.of_kind(kind) if c in rec.channels
+                and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")
+                and np.isfinite(rec.channels[c]).any()}
+    measured, reference = spread("measured"), spread("reference")
+    if reference and max(reference.values()) > 10 * max(measured.values(), default=0.0):
+        return max(reference, key=reference.get)
+    return max(measured, key=measured.get, default=None)
 
 
 def scale_of(data: Data, param, where: str) -> float:
