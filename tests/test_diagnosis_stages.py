@@ -582,6 +582,16 @@ def test_a_finding_validation_cannot_do_without_is_not_dropped_for_its_intervals
     assert vague_findings(data, model, ranges, [{"noise_ratio": 8.27}, {"noise_ratio": 66.12}], held) == [0]
     assert vague_findings(data, model, ranges, [{"noise_ratio": 8.27}, {"noise_ratio": 30.0}], held) == [0, 1]  # 79 %
     assert vague_findings(data, model, ranges, [{"noise_ratio": 40.0}, {"noise_ratio": 60.0}], held) == []
+    # seed 60's clean watflex-ec898126: an elbow encoder offset of 1.5e-7 rad [-1.5e-4, 1.5e-4], validation 0.906 x
+    # the noise with it and 0.92 x without (elbow_torque_cmd 1.380 x either way): nothing above the noise is
+    # removed, so it is vague (it was kept: the mean, below 1, counted as 100 % removed)
+    offset = Model([{"effect": "sensor_offset", "where": "elbow_angle", "offset": 1.5e-7}])
+
+    def scores(mean, worst):
+        return {"noise_ratio": mean, "worst_channel": "elbow_torque_cmd", "worst_ratio": worst,
+                "channel_ratios": {"elbow_torque_cmd": worst}}
+    assert vague_findings(data, offset, {0: {"offset": (-1.5e-4, 1.5e-4)}}, [scores(0.92, 1.381)], scores(0.906, 1.380)) == [0]
+    assert vague_findings(data, offset, {0: {"offset": (-1.5e-4, 1.5e-4)}}, [scores(0.95, 3.0)], scores(0.906, 1.2)) == []
 
 
 def test_elimination_drops_a_finding_that_validation_does_not_need(monkeypatch):
