@@ -204,6 +204,7 @@ def test_concealed_names_what_the_datasheet_models_residual_carries():
     assert concealed(cands, rig, slots, at, noise + some_a, [cands[1]]) is cands[0]  # of the cost
 
 
+@pytest.mark.slow
 def test_blind_laser_diagnosis_names_coulomb_friction_whatever_the_file_order(tmp_path):
     """End to end on 1.2 s recordings made with 0.6 / 0.3 N m hub friction and noise (both step
     directions, 1.15 kg), plus a last recording at rest in which nothing moves (issue 14: the old

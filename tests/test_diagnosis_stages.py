@@ -696,6 +696,7 @@ def test_with_training_within_the_noise_validation_decides():
     assert shortfall(fitted(0.8558, 0.8511, 1.40, 1.9), later=False) != ""  # 16 % of the excess
     assert shortfall(fitted(0.8558, 0.8600, 0.8792, 0.95), later=False) != ""  # training worse
 
+
 def test_the_refit_compass_runs_only_near_the_noise():
     """compass_worth(): the refit's pattern search is for a refit short of the noise on some channel
     (a clean Watflex case at 2.2 x), not for one far off (a 0.33 kg payload left the refit at 11.7 x:

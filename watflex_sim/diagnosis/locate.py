@@ -24,8 +24,9 @@ def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int) -> str:
     if motion:
         q = rec.channels[motion]
         dt = float(np.median(np.diff(rec.time)))
-        v = np.gradient(q, dt)[i0:i1]
-        span = float(np.nanmax(np.abs(np.gradient(q, dt)))) or 1.0
+        velocity = np.gradient(q, dt)
+        v = velocity[i0:i1]
+        span = float(np.nanmax(np.abs(velocity))) or 1.0
         moving = np.abs(v) > 0.05 * span
         if moving.mean() < 0.2:
             words.append(f"near zero velocity ({motion} at rest)")

@@ -205,7 +205,8 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
     far worse than with it (`held`): it removes less than EXPLAINED_SHARE of the excess over the noise that
     validation has without it (excess_gain: on the mean, or the furthest channel, or none if validation without
     it is within the margin everywhere; seed 60's clean watflex-ec898126 kept an elbow encoder offset of 1.5e-7 rad
-    [-1.5e-4, 1.5e-4] as 'removing 100 %' of a mean 0.92 x the noise, which has no excess). A finding that removes more is told from no effect by the data themselves; an
+    [-1.5e-4, 1.5e-4] as 'removing 100 %' of a mean 0.92 x the noise, which has no excess). A finding that removes
+    more is told from no effect by the data themselves; an
     interval that still reaches "none" describes where its value is on a rough or many-valleyed cost, not
     whether it is there (seed 53, watflex-d245fa05: an elbow ripple at a wrong period, validation 7.6 x the noise
     with it and 66.1 x without (90 %), had its amplitude's interval widened to [-1.87, 6.03] by the training-only
