@@ -54,6 +54,12 @@ class Data:
     idle: frozenset = frozenset()  # rig parameters these recordings do not depend on (not refit)
     discretisation: list[dict[str, float]] = field(default_factory=list)  # per recording: channel -> the
     # simulator's own discretisation error (its unit), part of `noise` (add_discretisation_error)
+    sensor_noise: list[dict[str, float]] = field(default_factory=list)  # per recording: channel -> the noise
+    # the recording shows (declared or measured, its unit): `noise` before the closed-loop and discretisation parts
+    closed_loop_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what the
+    # rig's noise leaves in closed loop, squared, per sample (its unit^2; add_closed_loop_noise)
+    discretisation_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what a
+    # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
 
     @property
     def noise_floor(self) -> list[dict[str, float]]:
@@ -138,7 +144,7 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     how = (f"every recording in blocks of {min(blocks):.2g}-{max(blocks):.2g} s, half of them (a pseudo-random "
            f"choice fixed by its content) fitted, the other half validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
            + "; the same regimes in both, whatever the file order")
-    return Data(recordings, names, rig, channels, scale, noise, train, how)
+    return Data(recordings, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise])
 
 
 def add_closed_loop_noise(data: Data, clean: list[Recording], noisy: list[Recording]) -> None:
@@ -149,14 +155,17 @@ def add_closed_loop_noise(data: Data, clean: list[Recording], noisy: list[Record
     description's noise model is checked against the recording: where the simulated channel jitters
     more than the recorded one (its measured_noise), the floor is scaled down by that ratio (a white
     noise declared on an encoder that is really quantised would otherwise pass through a velocity loop
-    as volts of jitter the recording does not have, and hide real misfits)."""
+    as volts of jitter the recording does not have, and hide real misfits). Kept per sample too
+    (`data.closed_loop_sq`, scaled alike)."""
+    data.closed_loop_sq = [{} for _ in data.recordings]
     for i, (rec, a, b) in enumerate(zip(data.recordings, clean, noisy)):
         for c in data.channels[i]:
-            d = (np.asarray(b.channels[c]) - np.asarray(a.channels[c]))
-            d = d[np.isfinite(d)]
+            every = np.asarray(b.channels[c]) - np.asarray(a.channels[c])
+            d = every[np.isfinite(every)]
             if d.size:
                 simulated, recorded = measured_noise(np.asarray(b.channels[c])), measured_noise(rec.channels[c])
                 scale = min(1.0, recorded / simulated) if simulated > 0 else 1.0
+                data.closed_loop_sq[i][c] = np.nan_to_num(scale * every) ** 2
                 data.noise[i][c] = max(data.noise[i][c], scale * float(np.sqrt(np.mean(d**2))))
 
 
@@ -169,15 +178,17 @@ def add_discretisation_error(data: Data, ours: list[Recording], finer: list[Reco
     twice as fine, strain_2A 3.1-3.4 x its noise, the elbow encoder 3.0 x (the 0.1 rad staircase: 0.9 x and
     1.7 x); against four times as fine 4.0-4.2 x and 3.6-4.8 x (so a factor 2 is a lower bound); laser arm
     0.02-0.06 x. The added part is kept per recording and channel in `data.discretisation` (the report's
-    noise table)."""
+    noise table), and per sample, squared, in `data.discretisation_sq`."""
     data.discretisation = [{} for _ in data.recordings]
+    data.discretisation_sq = [{} for _ in data.recordings]
     for i, (a, b) in enumerate(zip(ours, finer)):
         for c in data.channels[i]:
-            d = np.asarray(b.channels[c]) - np.asarray(a.channels[c])
-            d = d[np.isfinite(d)]
+            every = np.asarray(b.channels[c]) - np.asarray(a.channels[c])
+            d = every[np.isfinite(every)]
             if d.size:
                 error = float(np.sqrt(np.mean(d**2)))
                 data.discretisation[i][c] = error
+                data.discretisation_sq[i][c] = np.nan_to_num(every) ** 2
                 data.noise[i][c] = math.hypot(data.noise[i][c], error)
 
 

@@ -8,7 +8,8 @@ of the best, each kept only if its *final* model improves training by MIN_GAIN p
 validation by MIN_HELD_GAIN; backward elimination (a finding whose removal from the final model does
 not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
-the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data,
+the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
+far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
 `explained` when the findings bring both there, `unexplained` otherwise.
 """
 from __future__ import annotations
@@ -23,7 +24,7 @@ from .data import Data, Model, fit_scores, noise_nrmse, prepare, residual_vector
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import finding
 from .fitting import value_of
-from .locate import locate
+from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, offset_alternative, polish, single_from_pair
 from .refit import calibrate_noise, final_refit, refit_nominal
 from .runner import Runner, evaluator
@@ -88,6 +89,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     rejected, screened_report, fitted_report, alternatives = [], [], [], []
     round_ = 0
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
+    local, local_tried = [], False  # windows far above their local null (locate.local_excess) where the refit model is
+    # within the noise on the whole: a round of their own; they then judge its findings to the end
+
+    def judge(result: dict) -> dict:
+        """gains of a fitted candidate, and in the round for local windows the share of their excess it removes."""
+        out = gains(result, train, held)
+        return out | {"local_gain": local_gain(data, local, sims, result["sims"])} if local and not current.effects else out
+
     while len(current.effects) < max_effects:
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         pinned = beyond_tolerance(data, current)
@@ -95,12 +104,20 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         if within_noise(train, held):
             beyond = [] if bounds_tried else pinned
             bounds_tried = True
-            if not beyond:
+            if not (beyond or current.effects or local_tried):
+                local, local_tried = local_excess(data, sims), True
+            if not beyond and (current.effects or not local):
                 say("verdict", f"training {train['noise_ratio']:.2f} x and validation {held['noise_ratio']:.2f} x the noise, "
                     f"every channel within {NOISE_MARGIN:g} x: nothing left to explain")
                 break
-            say("verdict", "within the noise, but with " + ", ".join(sorted({c.where for c in beyond}))
-                + " at a tolerance bound: is the datasheet wrong beyond it?")
+            if beyond:
+                say("verdict", "within the noise, but with " + ", ".join(sorted({c.where for c in beyond}))
+                    + " at a tolerance bound: is the datasheet wrong beyond it?")
+            else:
+                w = local[0]
+                say("verdict", f"within the noise on the whole, but {len(local)} windows of {LOCAL_WINDOW_S:g} s stand up to "
+                    f"{w['ratio']:.1f} x above what noise and discretisation leave there ({w['channel']} in {w['recording']}, "
+                    f"{w['t_start']:.2f}-{w['t_end']:.2f} s, {w['regime']}): a round for them")
         round_ += 1
         r0 = residual_vector(data, sims)
         # signatures are taken around the current model: an effect can look different once
@@ -130,10 +147,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else ""))
         results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [gains(scored(data, r, r["sims"]), train, held) for r in results if "error" not in r]
+        fitted = [judge(scored(data, r, r["sims"])) for r in results if "error" not in r]
         if not fitted:
             break
-        fitted.sort(key=lambda r: (-r["score"], r["effect"], r["where"]))
+        fitted.sort(key=lambda r: (-r.get("local_gain", r["score"]), r["effect"], r["where"]))
         fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
                                "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
                                "validation_noise_ratio": round(r["held_out"]["noise_ratio"], 4),
@@ -144,14 +161,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         later = bool(current.effects) and (best["effect"], best["where"]) not in {(c.effect, c.where) for c in pinned}
         if earns_place(best, later):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
-            best = gains(polish(data, runner, best, rig_start={}), train, held)  # {}: the datasheet's values
+            best = judge(polish(data, runner, best, rig_start={}))  # {}: the datasheet's values
             room = max_effects - len(current.effects) >= 2
             alternative = offset_alternative(data, runner, current, best) if room else None
             if alternative is not None:
-                alternative = gains(alternative, train, held)
+                alternative = judge(alternative)
                 if alternative["score"] > best["score"] + PAIR_MARGIN:  # restart the single from the pair's levels
                     again = single_from_pair(data, runner, best, alternative)
-                    again = again and gains(again, train, held)
+                    again = again and judge(again)
                     if again is not None and again["score"] > best["score"]:
                         best = again
                 if alternative["score"] > best["score"] + PAIR_MARGIN and earns_place(alternative, later):
@@ -177,7 +194,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if len(current.effects) < found:
         sims = runner.simulate(current) or sims
     while True:  # until every finding's intervals tell it from no effect (explain.indistinct)
-        current, sims, ablated = eliminate(data, runner, current, sims, say)
+        current, sims, ablated = eliminate(data, runner, current, sims, say, local)
         if len(current.effects) < found:
             steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
@@ -212,14 +229,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
     curved = curved_channels(data, sims)
-    verdict = verdict_of(current, train_f, held_f, share, curved)
+    verdict = verdict_of(current, train_f, held_f, share, curved, local)
     alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
     report = {
         "format": "flexarm-diagnosis/1",
         "rig": data.rig.name,
         "recordings": data.names,
         "verdict": verdict,
-        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved),
+        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -244,7 +261,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if verdict == "unexplained":
         report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
                               "validation_noise_ratio": held_f["noise_ratio"], "candidates_tried": fitted_report,
-                              "curved_channels": curved,
+                              "curved_channels": curved, "local_windows": local,
                               "parameters_at_bounds": report["parameters_at_bounds"]}
     if propose and alternatives:
         from .experiment import propose_experiment

@@ -4,12 +4,14 @@ Contract: a fitted candidate is scored by `gains` against the model before it (t
 noise ratios, the share of validation's excess over the noise it removes); it earns its place (`shortfall`
 says why not) when training falls by MIN_GAIN per parameter and validation by MIN_HELD_GAIN, and a later
 finding also removes MIN_EXCESS_GAIN of what validation has above the noise (with training already within the
-noise, removing MIN_EXCESS_GAIN of validation's excess without making training worse is enough). `eliminate`
-drops findings the final model does not need on validation data; `vague_findings` those the data do not tell from no effect.
-`verdict_of`: `nothing_missing` only when a model without findings is within NOISE_MARGIN x the noise on training
-AND validation data, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
-excess), `unexplained` otherwise, and whenever a channel's residual is a static curve of its own value
-(`curved_channels`: a nonlinear characteristic the catalogue does not have); `verdict_reason` says why in words.
+noise, removing MIN_EXCESS_GAIN of validation's excess without making training worse is enough; in a round
+asked for by windows far above their local null, locate.local_excess, removing LOCAL_GAIN of their excess).
+`eliminate` drops findings the final model does not need on validation data (or those windows);
+`vague_findings` those the data do not tell from no effect. `verdict_of`: `nothing_missing` only when a model
+without findings is within NOISE_MARGIN x the noise on training AND validation data and no window is far above
+its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the excess),
+`unexplained` otherwise, and whenever a channel's residual is a static curve of its own value (`curved_channels`:
+a nonlinear characteristic the catalogue does not have); `verdict_reason` says why in words.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import numpy as np
 from ..recording import Recording
 from .data import Data, Model, fit_scores, peak
 from .explain import indistinct
+from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
 from .runner import Runner
 from .screening import MIN_GAIN
 from .tolerance import knob_partner
@@ -35,6 +38,8 @@ CURVE_SIGNIFICANCE = 20.0  # the curve's gain over what chance gives two regress
 CURVE_BEND = 5.0  # ... where it bends away from the line by this many noise sd somewhere (at the channel's peaks): a
 # characteristic, not a misfit of 1 % of the noise's variance that only many samples make significant
 CURVE_SHARE = 0.5  # ... and this share of what a gain and an offset leave above the noise: a nonlinear characteristic
+LOCAL_GAIN = 0.5  # in a round asked for by windows far above their local null (locate.local_excess), a finding must
+# remove this share of their excess, without making training or validation worse
 
 
 def gains(result: dict, train_now: dict, held_now: dict) -> dict:
@@ -77,7 +82,14 @@ def shortfall(result: dict, later: bool) -> str:
     removes MIN_EXCESS_GAIN of validation's excess (and MIN_HELD_GAIN of its ratio) without making training
     worse earns its place too. Seed 59's laser_arm-7cf6ef08: a beam 0.64 x as stiff, training at 0.86 x,
     validation (which held most of the steps' fast parts) at 1.48 x; the stiffness fitted on training took
-    validation to 0.88 x but training by 0.5 % only: it was rejected and the verdict was `unexplained`."""
+    validation to 0.88 x but training by 0.5 % only: it was rejected and the verdict was `unexplained`.
+    In a round asked for by local windows (the result carries `local_gain`), what counts is LOCAL_GAIN of their excess
+    removed with training and validation no worse: such a misfit is too short to move the whole recording's ratios."""
+    if "local_gain" in result:
+        if result["local_gain"] >= LOCAL_GAIN and result["train_gain"] >= 0.0 and result["held_gain"] >= 0.0:
+            return ""
+        return (f"removes {100 * result['local_gain']:.0f} % of the local windows' excess (at least {100 * LOCAL_GAIN:.0f} % "
+                f"asked), training {100 * result['train_gain']:+.1f} %, validation {100 * result['held_gain']:+.1f} %")
     if (result.get("train_within") and result["train_gain"] >= 0.0 and result["held_gain"] >= MIN_HELD_GAIN
             and result["excess_gain"] >= MIN_EXCESS_GAIN):
         return ""
@@ -164,18 +176,19 @@ def effective_samples(e: np.ndarray, drop: float = 0.05) -> float:
     return n / max(1.0, 1.0 + 2.0 * float(acf[1:below[0] if below.size else n].sum()))
 
 
-def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict]) -> str:
+def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict], local: list[dict] = ()) -> str:
     """The verdict for a final `model` whose fit_scores are `train` and `held` (validation), its findings
-    removing `share` of validation's excess over the noise (explained_share), `curved` its curved_channels."""
+    removing `share` of validation's excess over the noise (explained_share), `curved` its curved_channels,
+    `local` the windows far above their local null that asked for a round (locate.local_excess)."""
     if curved:
         return "unexplained"
     if not model.effects:
-        return "nothing_missing" if within_noise(train, held) else "unexplained"
+        return "nothing_missing" if within_noise(train, held) and not local else "unexplained"
     return "explained" if within_noise(train, held) or share >= EXPLAINED_SHARE else "unexplained"
 
 
 def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict]) -> str:
+                   curved: list[dict], local: list[dict] = ()) -> str:
     worst = max((train, held), key=lambda s: s["worst_ratio"])
     now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
            f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
@@ -187,6 +200,12 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
                           "sensor or amplifier characteristic the catalogue "
                           "does not have" for c in curved)
                 + f" ({now})")
+    if verdict == "unexplained" and local and within_noise(train, held):
+        return (f"within {NOISE_MARGIN:g} x the noise on the whole, but {len(local)} windows of {LOCAL_WINDOW_S:g} s stand "
+                f"more than {LOCAL_MARGIN:g} x above what noise and discretisation leave there: "
+                + "; ".join(f"{w['channel']} in {w['recording']} at {w['t_start']:.2f}-{w['t_end']:.2f} s ({w['regime']}) "
+                            f"{w['ratio']:.1f} x" for w in local[:3])
+                + f"; no catalogue effect removes {100 * LOCAL_GAIN:.0f} % of it ({now})")
     if verdict == "nothing_missing":
         return f"the nominal model, refit within tolerance, is within {NOISE_MARGIN:g} x the noise on every channel: {now}"
     if verdict == "explained":
@@ -213,16 +232,19 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
     fit's distance; dropped, the case became `unexplained` with no finding). Seed 46's spurious sensor gain x1.09
     [0.968, 1.214] on a cubic strain bridge (8.27 x without it, 7.17 x with: 16 %) is still dropped. An effect on a
     rig parameter's knob is never vague by its interval: that carries the parameter's tolerance by design (the
-    data fix their product: tie_knob_columns)."""
+    data fix their product: tie_knob_columns). Nor is one that local windows need (eliminate's `local_needed`)."""
     return [i for i, effect in enumerate(model.effects)
             if knob_partner(data, effect) is None and indistinct(data, effect, ranges.get(i, {}))
-            and excess_gain(ablated[i], held) < EXPLAINED_SHARE]
+            and excess_gain(ablated[i], held) < EXPLAINED_SHARE and not ablated[i].get("local_needed")]
 
 
-def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> tuple[Model, list, list[dict]]:
+def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], say,
+              local: list[dict] = ()) -> tuple[Model, list, list[dict]]:
     """Backward elimination: drop, one at a time, the effect whose removal from the final model leaves
-    validation best, while that is no worse than MIN_HELD_GAIN (what a finding had to gain to enter);
-    returns the model, its simulations and, per remaining effect, fit_scores of validation without it."""
+    validation best, while that is no worse than MIN_HELD_GAIN (what a finding had to gain to enter), and
+    it does not remove LOCAL_GAIN of the excess of the `local` windows that asked for a round (locate.local_excess);
+    returns the model, its simulations and, per remaining effect, fit_scores of validation without it (with
+    `local_needed`)."""
     while True:
         held = fit_scores(data, sims, "held_out")["noise_ratio"]
         if not model.effects:
@@ -230,10 +252,11 @@ def eliminate(data: Data, runner: Runner, model: Model, sims: list[Recording], s
         say("elimination", f"checking each of the {len(model.effects)} findings on validation data without it")
         reduced = [Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
                    for i in range(len(model.effects))]
-        without = [(fit_scores(data, s, "held_out"), m, s)  # a diverging one scores inf
-                   for m, s in zip(reduced, runner.simulate_models(reduced))]
-        worst = int(np.argmin([w[0]["noise_ratio"] for w in without]))
-        if without[worst][0]["noise_ratio"] > held * (1 + MIN_HELD_GAIN):
+        without = [(fit_scores(data, s, "held_out") | {"local_needed": bool(local) and s is not None
+                                                        and local_gain(data, local, s, sims) >= LOCAL_GAIN}, m, s)
+                   for m, s in zip(reduced, runner.simulate_models(reduced))]  # a diverging one scores inf
+        worst = int(np.argmin([math.inf if w[0]["local_needed"] else w[0]["noise_ratio"] for w in without]))
+        if without[worst][0]["local_needed"] or without[worst][0]["noise_ratio"] > held * (1 + MIN_HELD_GAIN):
             return model, sims, [w[0] for w in without]
         say("elimination", f"dropping {model.effects[worst]['effect']} at {model.effects[worst]['where']}: validation "
             f"{held:.3f} x the noise with it, {without[worst][0]['noise_ratio']:.3f} x without")
