@@ -219,20 +219,20 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
 
 
 def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: list[dict], held: dict) -> list[int]:
-    """Indices of the findings the data do not tell from no effect: every 95 % interval includes the value at which
-    the effect vanishes (explain.indistinct), and validation without it (`ablated`, fit_scores by finding) is not
-    far worse than with it (`held`): it removes less than EXPLAINED_SHARE of the excess over the noise that
-    validation has without it (excess_gain: on the mean, or the furthest channel, or none if validation without
-    it is within the margin everywhere; seed 60's clean watflex-ec898126 kept an elbow encoder offset of 1.5e-7 rad
-    [-1.5e-4, 1.5e-4] as 'removing 100 %' of a mean 0.92 x the noise, which has no excess). A finding that removes
-    more is told from no effect by the data themselves; an
-    interval that still reaches "none" describes where its value is on a rough or many-valleyed cost, not
-    whether it is there (seed 53, watflex-d245fa05: an elbow ripple at a wrong period, validation 7.6 x the noise
-    with it and 66.1 x without (90 %), had its amplitude's interval widened to [-1.87, 6.03] by the training-only
-    fit's distance; dropped, the case became `unexplained` with no finding). Seed 46's spurious sensor gain x1.09
-    [0.968, 1.214] on a cubic strain bridge (8.27 x without it, 7.17 x with: 16 %) is still dropped. An effect on a
-    rig parameter's knob is never vague by its interval: that carries the parameter's tolerance by design (the
-    data fix their product: tie_knob_columns). Nor is one that local windows need (eliminate's `local_needed`)."""
+    """Indices of the findings the data do not tell from no effect: every 95 % interval includes the value at which the
+    effect vanishes (explain.indistinct), and validation without it (`ablated`, fit_scores by finding) is not far
+    worse than with it (`held`): it removes less than EXPLAINED_SHARE of the excess over the noise that validation
+    has without it (excess_gain: on the mean, or the furthest channel, or none if validation without it is within
+    the margin everywhere; seed 60's clean watflex-ec898126 kept an elbow encoder offset of 1.5e-7 rad [-1.5e-4,
+    1.5e-4] as 'removing 100 %' of a mean 0.92 x the noise, which has no excess). A finding that removes more is
+    told from no effect by the data themselves; an interval that still reaches "none" describes where its value is
+    on a rough or many-valleyed cost, not whether it is there (seed 53, watflex-d245fa05: an elbow ripple at a wrong
+    period, validation 7.6 x the noise with it and 66.1 x without (90 %), had its amplitude's interval widened to
+    [-1.87, 6.03] by the training-only fit's distance; dropped, the case became `unexplained` with no finding). Seed
+    46's spurious sensor gain x1.09 [0.968, 1.214] on a cubic strain bridge (8.27 x without it, 7.17 x with: 16 %)
+    is still dropped. An effect on a rig parameter's knob is never vague by its interval: that carries the
+    parameter's tolerance by design (the data fix their product: tie_knob_columns). Nor is one that local windows
+    need (eliminate's `local_needed`)."""
     return [i for i, effect in enumerate(model.effects)
             if knob_partner(data, effect) is None and indistinct(data, effect, ranges.get(i, {}))
             and excess_gain(ablated[i], held) < EXPLAINED_SHARE and not ablated[i].get("local_needed")]
