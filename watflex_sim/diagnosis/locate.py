@@ -110,7 +110,7 @@ def local_null(data: Data, i: int, channel: str, width: int) -> np.ndarray:
 def local_excess(data: Data, sims: list[Recording]) -> list[dict]:
     """Windows of LOCAL_WINDOW_S where the residual's RMS is LOCAL_MARGIN x above its local_null, largest first:
     recording (its index and name), channel, first and last sample, times (s), regime and ratio. Measured on the
-    refit nominal model of 16 benchmark cases (seeds 59-61, windows of 0.1 s): the 12 clean ones at most 2.2 x,
+    refit nominal model of 15 benchmark cases (seeds 59-61, windows of 0.1 s): the 12 clean ones at most 2.2 x,
     two dwell-time stictions called `nothing_missing` (0.92-1.0 x the noise on the whole) 5.6 x and 6.3 x after the
     dwell, a laser motor current outside the catalogue (1.14 x on the whole, called `nothing_missing`) 4.9 x."""
     found = []
