@@ -67,11 +67,10 @@ def locate(data: Data, sims: list[Recording], top: int = 8) -> list[dict]:
                                                    data.scale, data.noise):
         dt = float(np.median(np.diff(rec.time)))
         width = max(3, int(WINDOW_S / dt))
-        kernel = np.ones(width) / width
         for c in chans:
             raw = np.nan_to_num(sim.channels[c] - rec.channels[c])
             r = raw / scale[c]
-            rms = np.sqrt(np.convolve(r**2, kernel, mode="same"))
+            rms = np.sqrt(_moving_mean(r**2, width))
             threshold = max(3 * noise[c] / scale[c], 0.5 * float(np.sqrt(np.mean(r**2))), 1e-3)
             hot = rms > threshold
             edges = np.flatnonzero(np.diff(np.r_[0, hot.astype(int), 0]))
@@ -89,6 +88,11 @@ def locate(data: Data, sims: list[Recording], top: int = 8) -> list[dict]:
 
 def _moving_mean(x: np.ndarray, width: int) -> np.ndarray:
     return np.convolve(x, np.ones(width) / width, mode="same")
+
+
+def _local_width(rec: Recording) -> int:
+    """Samples in a LOCAL_WINDOW_S window of `rec`."""
+    return max(3, int(round(LOCAL_WINDOW_S / float(np.median(np.diff(rec.time))))))
 
 
 def local_null(data: Data, i: int, channel: str, width: int) -> np.ndarray:
@@ -115,8 +119,7 @@ def local_excess(data: Data, sims: list[Recording]) -> list[dict]:
     dwell, a laser motor current outside the catalogue (1.14 x on the whole, called `nothing_missing`) 4.9 x."""
     found = []
     for i, (rec, sim, name, chans) in enumerate(zip(data.recordings, sims, data.names, data.channels)):
-        dt = float(np.median(np.diff(rec.time)))
-        width = max(3, int(round(LOCAL_WINDOW_S / dt)))
+        width = _local_width(rec)
         for c in chans:
             r = np.nan_to_num(rec.channels[c] - sim.channels[c])
             ratio = np.sqrt(_moving_mean(r**2, width) / local_null(data, i, c, width))
@@ -140,8 +143,7 @@ def local_ratio(data: Data, sims: list[Recording] | None, windows: list[dict]) -
     total, count = 0.0, 0
     for w in windows:
         i, c, a, b = w["index"], w["channel"], w["first"], w["last"]
-        dt = float(np.median(np.diff(data.recordings[i].time)))
-        null = local_null(data, i, c, max(3, int(round(LOCAL_WINDOW_S / dt))))[a:b]
+        null = local_null(data, i, c, _local_width(data.recordings[i]))[a:b]
         r = np.nan_to_num(data.recordings[i].channels[c][a:b] - sims[i].channels[c][a:b])
         total += float(np.sum(r**2 / null))
         count += b - a
