@@ -8,9 +8,11 @@ One module per stage, each with its contract in its docstring:
   screening   candidate effects, their signatures, the screening and the shortlist
   effect_fit  the fit of one candidate effect (a quantised step's search, a ripple's period scan)
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
-  refine      the chosen candidate's polish and the other forms of the same finding
+  refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
+  period      a ripple's period profiled: the cost with the rest re-solved at each period
   tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
-  uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost)
+  uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost, a
+              ripple's period profile)
   locate      where the residual stands out of the noise, in which regime
   explain     findings in the rig's physical terms
   experiment  the experiment that would separate explanations the data cannot

@@ -7,7 +7,8 @@ correlation and for the rig's noise fed back in closed loop: `fitting.intervals`
 estimate from the training half alone), our own discretisation (`discretisation_error`, and `fitting.intervals`'
 bound on the bias it can cause) and a cost that stick-slip makes rough or a valley bends (`slice_reach`, a linearised
 profile: the estimate is known only up to where the cost's smooth trend, the other parameters following, rises above
-its roughness). Knob-tied pairs (an effect's ratio and the rig
+its roughness), and along a ripple's period, where the cost's valley bends past any Jacobian's reach, a profile
+(period.profile_reach). Knob-tied pairs (an effect's ratio and the rig
 parameter turning the same knob) share one Jacobian column, and the ratio's interval also spans the datasheet's
 split of their product (`nominal_split`).
 """
@@ -22,6 +23,7 @@ from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
 from .fitting import (Slot, at_internal, effect_slots_of, fd_step, intervals, jacobian, refit_cost, residual_variance,
                       rig_slots, value_of)
+from .period import neutral_others, periodic_name, profile_reach
 from .runner import Runner, evaluator, in_units
 from .tolerance import knob_partner
 
@@ -119,6 +121,13 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
             low, high = min(low, biased[k][0]), max(high, biased[k][1])
             low, high = nominal_split(data, model, slot, low, high)
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
+    for i, effect in enumerate(model.effects):  # a ripple's period and what trades with it: their profile
+        if periodic_name(effect):
+            for k, (low, high) in profile_reach(evaluate, model, i, slots, J, r, replicates, error,
+                                                   neutral_others(data, effect)).items():
+                at = out.setdefault(slots[k].where[1], {})
+                was = at.get(slots[k].name, (low, high))
+                at[slots[k].name] = (float(min(was[0], low)), float(max(was[1], high)))
     return out
 
 
