@@ -2,8 +2,10 @@
 
 Contract: `period_profile(evaluate, model, index, slots, J, periods)` returns, for each period, the model with
 effect `index`'s ripple (effects.Param.periodic) at that period and every other slot re-optimised, and its cost
-0.5 |r|^2 (in `evaluate`'s units), the others re-optimised to first order. `profile_ladder` gives the periods
-to try around an estimate.
+0.5 |r|^2 (in `evaluate`'s units), the others re-optimised to first order. `profile_reach(...)` returns, per
+effect parameter, the range of its values over the profile's points the data cannot tell from the best of them
+(`limits`: the noise along each difference, the discretisation's shift), for the 95 % intervals. `profile_ladder`
+gives the periods to try around an estimate, `neutral_others` a ripple's spring at 0.
 
 Why: at a given period a ripple a sin(2 pi x / period + phase) is linear, to first order, in the a sin + b cos it
 is, and the other slots in their Jacobian's columns, so a linear solve at each period is a profile likelihood. Where
@@ -24,7 +26,7 @@ from .fitting import Slot, at_internal, refit_step, residual_variance, value_of
 
 PROFILE_RATIO = 1.12  # one period of the profile to the next
 PROFILE_STEPS = 4  # periods each side of the estimate at first ...
-PROFILE_MORE = 4  # ... and this many more on a side whose outermost is still within the threshold, up to the bound
+PROFILE_MORE = 4  # ... and this many more on a side whose outermost is still within its limit, up to the bound
 PROFILE_ROUNDS = 3  # at most this many times a side
 
 
