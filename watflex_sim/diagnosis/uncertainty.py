@@ -126,16 +126,18 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
             out.setdefault(slot.where[1], {})[slot.name] = (float(low), float(high))
     for i, effect in enumerate(model.effects):  # a ripple's period and what trades with it: their profile
         if periodic_name(effect):
-            for k, (low, high) in profile_reach(evaluate, model, i, slots, J, r, replicates, error,
-                                                   neutral_others(data, effect)).items():
-                at = out.setdefault(slots[k].where[1], {})
-                was = at.get(slots[k].name, (low, high))
-                at[slots[k].name] = (float(min(was[0], low)), float(max(was[1], high)))
-    for k, (low, high) in split_reach(evaluate, model, slots, len(effect_slots), r, J, error).items():
+            widen(out, slots, profile_reach(evaluate, model, i, slots, J, r, replicates, error, neutral_others(data, effect)))
+    widen(out, slots, split_reach(evaluate, model, slots, len(effect_slots), r, J, error))
+    return out
+
+
+def widen(out: dict[int, dict], slots: list[Slot], reach: dict[int, tuple[float, float]]) -> None:
+    """Each interval in `out` (effect index -> parameter -> (low, high)) widened to `reach` (slot index -> (low,
+    high)); a parameter without one yet gets the reach."""
+    for k, (low, high) in reach.items():
         at = out.setdefault(slots[k].where[1], {})
         was = at.get(slots[k].name, (low, high))
         at[slots[k].name] = (float(min(was[0], low)), float(max(was[1], high)))
-    return out
 
 
 def split_reach(evaluate, model: Model, slots: list[Slot], n: int, r: np.ndarray, J: np.ndarray,
