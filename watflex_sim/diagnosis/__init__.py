@@ -6,7 +6,8 @@ One module per stage, each with its contract in its docstring:
   fitting     Levenberg-Marquardt on bounded slots, 95 % intervals
   refit       the nominal model re-simulated, the rig's parameters refit, what noise and discretisation leave
   screening   candidate effects, their signatures, the screening and the shortlist
-  effect_fit  the fit of one candidate effect (a quantised step's search, a ripple's period scan)
+  effect_fit  the fit of one candidate effect (a quantised step's search; from a scan's start too)
+  scan        scans of a ripple's period and of a shape parameter (a time constant): where a fit starts
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
   refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
   period      a ripple's period profiled: the cost with the rest re-solved at each period

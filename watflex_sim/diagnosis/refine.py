@@ -13,7 +13,8 @@ from .explain import units_at
 from .fitting import Slot, levenberg, rig_slots, unpack, value_of
 from .period import neutral_others, period_profile, periodic_name, profile_ladder
 from .runner import Runner, evaluator, in_units
-from .effect_fit import PERIOD_CHECKED, period_ladder, scored
+from .effect_fit import scored
+from .scan import PERIOD_CHECKED, period_ladder
 
 POLISH_ITERATIONS = 6
 

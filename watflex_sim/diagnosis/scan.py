@@ -1,0 +1,154 @@
+"""Scans of a candidate's nonlinear parameter: where a fit starts when the residual is far from convex in it.
+
+Contract: `scan_period` scans a ripple's period (effects.Param.periodic), `scan_shape` a shape parameter
+(period.shape_name: a time constant, a Stribeck velocity); both run `scan_rungs`: at each rung the parameters the
+effect is linear in, to first order, are re-solved with the rig's columns by bounded least squares, the best rungs
+carried on by Gauss-Newton steps, and (values, their cost) returned for the fit to start from
+(effect_fit.fit_candidate). Costs are the caller's (`cost` of a residual, in the fit's noise units).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..effects import CATALOGUE
+from .data import Model
+from .fitting import Slot, refit_step
+from .period import shape_name as period_shape_name
+from .screening import Candidate
+
+PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
+# or more (the true period is at most a quarter cycle of phase drift across the range from a rung, where a sine
+# still matches it to 0.9: sin(pi / 4) / (pi / 4)) ...
+PERIOD_LADDER = 1.4  # ... and the ratio of one longer period to the next, where it holds less ...
+PERIOD_LONGEST = 8.0  # x the motion's range: ... up to this (a longer ripple is a smooth bend over the range, which the
+# spring and the screening's own start, 3 x the range, already stand for)
+PERIOD_CHECKED = 3  # the periods whose linear estimate fits best are simulated there ...
+PERIOD_STEPS = 2  # ... and moved on by this many Gauss-Newton steps (the scan's columns, one simulation each)
+SHAPE_LADDER = 2.0  # a shape parameter's scan (a time constant, a Stribeck velocity): the ratio of one rung to the next
+
+
+def period_ladder(slot: Slot, motion: float) -> list[float]:
+    """Periods to scan within `slot` (rad, m) for a motion range `motion`: evenly spaced in cycles over the
+    range (PERIOD_CYCLES_STEP) down to one cycle, then PERIOD_LADDER apart up to PERIOD_LONGEST ranges."""
+    periods, cycles = [], motion / slot.low
+    while cycles >= 1.0:
+        periods.append(motion / cycles)
+        cycles -= PERIOD_CYCLES_STEP
+    period = periods[-1] * PERIOD_LADDER if periods else slot.low
+    while period <= min(slot.high, PERIOD_LONGEST * motion):
+        periods.append(period)
+        period *= PERIOD_LADDER
+    return periods
+
+
+def shape_name(cand: Candidate) -> str:
+    """The candidate's shape parameter (period.shape_name: a dwell-time stiction's time constant, a Stribeck
+    velocity), '' if it has none or does not fit it."""
+    name = period_shape_name(cand.effect)
+    return name if name in cand.slots and name not in cand.quanta else ""
+
+
+def shape_ladder(slot: Slot) -> list[float]:
+    """Values to scan a shape parameter at: SHAPE_LADDER apart across its slot (rung midpoints, off its bounds)."""
+    rungs, value = [], slot.low * math.sqrt(SHAPE_LADDER)
+    while value < slot.high:
+        rungs.append(value)
+        value *= SHAPE_LADDER
+    return rungs
+
+
+def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
+                rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> tuple[dict[str, float], float | None]:
+    """A periodic parameter's value (a ripple a sin(2 pi x / period + phase), effects.Param.periodic) from a scan,
+    with its amplitude and phase: the residual is far from convex in the period (seed 52, a 0.77 rad Watflex elbow
+    ripple fitted at 1.35 rad from its start at 3 x the motion's range, 5 x the noise left), but at a given
+    period it is linear, to first order, in the a sin + b cos the ripple is. Each period of `period_ladder` is
+    simulated twice (the amplitude at its start, phase 0 and pi/2); with the effect's other neutral parameters (a
+    spring: its own column) the rest is `scan_rungs`'. `values` unchanged, cost None, for an effect without a
+    periodic parameter."""
+    param = next((p for p in CATALOGUE[cand.effect][1] if p.periodic), None)
+    if param is None:
+        return values, None
+    period, size, amp = param.name, cand.start["amplitude"], cand.slots["amplitude"]
+    periods = period_ladder(cand.slots[period], cand.slots[period].low / param.low)  # the slot is in motion ranges
+    rung = lambda p: [({period: p, "amplitude": size, "phase": phase}, size) for phase in (0.0, math.pi / 2)]  # noqa: E731
+    as_own = lambda p, x: {period: p, **cand.ripple(*x)}  # noqa: E731
+    fixed = [n for n in cand.neutral if n != "amplitude"]  # a spring beside the ripple: its own column
+    return scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig), periods, rung, [amp, amp],
+                      np.zeros(2), as_own, fixed)
+
+
+def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
+               rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> tuple[dict[str, float], float | None]:
+    """A shape parameter's value (`shape_name`) from a scan over `shape_ladder`: at a given shape the effect is, to
+    first order, linear in its neutral parameters, but the residual is far from convex in the shape (seeds 54, 55,
+    62, 63: a Watflex dwell-time stiction's time constant of 0.6-0.7 s fitted at 1.5-2 s from its 2 s start, gain 2x
+    too large; at the true time constant a gain near the truth fits better). Each rung is simulated once per neutral
+    parameter (at its probe); the rest is `scan_rungs`', but the best rung is returned whatever the values given
+    cost: the fit is started from both (`fit_candidate`). `values` unchanged, cost None, without a shape parameter."""
+    name = shape_name(cand)
+    if not name:
+        return values, None
+    own = list(cand.neutral)
+    slots = [cand.slots[n] for n in own]
+
+    def rung(v: float) -> list[tuple[dict[str, float], float]]:
+        return [({name: v, n: cand.probe(n)}, cand.probe(n) - cand.neutral[n]) for n in own]
+
+    def as_own(v: float, x: np.ndarray) -> dict[str, float]:
+        return {name: v, **{n: float(np.clip(x_n, s.low, s.high)) for n, x_n, s in zip(own, x, slots)}}
+
+    return scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig),
+                      shape_ladder(cand.slots[name]), rung, slots, np.array([cand.neutral[n] for n in own]), as_own, [],
+                      given=False)
+
+
+def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost, rig: tuple, rungs: list[float],
+               rung_probes, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
+               given: bool = True) -> tuple[dict[str, float], float | None]:
+    """The scan of one nonlinear parameter over `rungs`: one simulation with the effect at its neutral values, one per
+    `fixed` parameter at its probe (a column shared by all rungs), and at each rung those of `rung_probes(v)`
+    ((values, the probe's step) each: the rung's own columns); the columns, with the rig's (`rig`: columns, values,
+    bounds, internal units), estimate the rung's coefficients by bounded least squares from `rung_start` within
+    `rung_slots`; the PERIOD_CHECKED rungs whose estimate leaves the least residual are carried PERIOD_STEPS
+    Gauss-Newton steps on (the same columns, the residual simulated at the estimate: stick-slip makes the first
+    estimate rough; there, seed 52's ripple phase was 0.49 rad off and the estimate lost to a wrong period's), and the
+    one of least `cost` (of the residual) is kept, unless the values given cost less (`given`): (values, their cost).
+    `as_own(v, coefficients)` gives the effect's values at rung v."""
+    rig_columns, u_rig, lo_rig, hi_rig = rig
+    zero = {**values, **cand.neutral}
+    probes = [(v, rung_probes(v)) for v in rungs]
+    runs = evaluate([cand.model(base, zero)] + [cand.model(base, {**zero, n: cand.probe(n)}) for n in fixed]
+                    + [cand.model(base, {**zero, **p}) for _, ps in probes for p, _ in ps])
+    if any(r is None for r in runs[:1 + len(fixed)]):
+        return values, None
+    r0, shared = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(fixed, runs[1:])]
+    slots = [cand.slots[n] for n in fixed] + rung_slots
+    lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
+
+    def estimate(columns: np.ndarray, r: np.ndarray, at: np.ndarray) -> tuple[float, np.ndarray]:
+        """(residual left, the values of the fixed and the rung's coefficients) from the linear solve about `at`."""
+        left, step = refit_step(columns, r, np.concatenate([u_rig, at]), lo, hi)
+        return left, at + step[len(u_rig):]
+
+    def as_values(v: float, x: np.ndarray) -> dict[str, float]:
+        return {**values, **dict(zip(fixed, map(float, x[:len(fixed)]))), **as_own(v, x[len(fixed):])}
+
+    start, ranked, k = np.concatenate([[cand.neutral[n] for n in fixed], rung_start]), [], 1 + len(fixed)
+    for v, ps in probes:
+        own, k = runs[k:k + len(ps)], k + len(ps)
+        if all(r is not None for r in own):
+            columns = np.column_stack([rig_columns, *shared, *[(r - r0) / step for r, (_, step) in zip(own, ps)]])
+            ranked.append((*estimate(columns, r0, start), v, columns))
+    ranked.sort(key=lambda x: x[0])
+    contenders = [(v, x, columns) for _, x, v, columns in ranked[:PERIOD_CHECKED]]
+    for _ in range(PERIOD_STEPS):  # Gauss-Newton steps with the probes' columns: a linear estimate in a closed loop
+        runs = evaluate([cand.model(base, as_values(v, x)) for v, x, _ in contenders])  # with stick-slip is rough
+        contenders = [(v, x if r is None else estimate(columns, r, x)[1], columns) for (v, x, columns), r in zip(contenders, runs)]
+    tried = [values] * given + [as_values(v, x) for v, x, _ in contenders]
+    if not tried:
+        return values, None
+    costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
+    return tried[int(np.argmin(costs))], min(costs)
