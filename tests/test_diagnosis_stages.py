@@ -1021,6 +1021,22 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     assert found_cost < 0.1 * cost(evaluate([cand.model(Model(), start)])[0])
 
 
+DWELL_TRUTH = {"gain": 0.53, "time_constant": 0.67}  # a dwell-time stiction like seed 63's watflex-bddd453b (0.527, 0.666 s)
+DWELL_RESTS = np.geomspace(0.02, 8.0, 200)  # s
+
+
+def _dwell_rise(models):
+    """Stand-in residual of a dwell-time stiction: its break-away's rise gain (1 - exp(-t / tau)) over DWELL_RESTS,
+    the model's against DWELL_TRUTH's."""
+    def rise(e):
+        return e["gain"] * (1 - np.exp(-DWELL_RESTS / e["time_constant"]))
+    return [rise(m.effects[-1]) - rise(DWELL_TRUTH) for m in models]
+
+
+def _dwell_slots():
+    return {"gain": Slot(("effect", -1, "gain"), 0.0, 3.0), "time_constant": Slot(("effect", -1, "time_constant"), 0.05, 30.0, log=True)}
+
+
 def test_a_time_constant_is_found_by_a_scan_where_its_start_is_in_another_basin():
     """scan_shape(): a dwell-time stiction's time constant (seeds 54, 55, 62, 63: 0.6-0.7 s fitted at 1.5-2 s from the
     catalogue's 2 s start, the gain twice the truth) is scanned over shape_ladder with the gain re-solved at each rung.
@@ -1031,16 +1047,8 @@ def test_a_time_constant_is_found_by_a_scan_where_its_start_is_in_another_basin(
     from watflex_sim.diagnosis.scan import SHAPE_LADDER, scan_shape, shape_ladder
     from watflex_sim.diagnosis.screening import Candidate
 
-    rest = np.geomspace(0.02, 8.0, 200)  # s
-    truth = {"gain": 0.53, "time_constant": 0.67}
-
-    def rise(e):
-        return e["gain"] * (1 - np.exp(-rest / e["time_constant"]))
-
-    def evaluate(models):
-        return [rise(m.effects[-1]) - rise(truth) for m in models]
-
-    slots = {"gain": Slot(("effect", -1, "gain"), 0.0, 3.0), "time_constant": Slot(("effect", -1, "time_constant"), 0.05, 30.0, log=True)}
+    rest, truth, evaluate = DWELL_RESTS, DWELL_TRUTH, _dwell_rise
+    slots = _dwell_slots()
     cand = Candidate("dwell_time_stiction", "elbow", {"gain": 0.5, "time_constant": 2.0}, slots, {"gain": 0.0})
     start = {"gain": 1.2, "time_constant": 2.0}
     cost = lambda r: float(r @ r)  # noqa: E731
@@ -1066,19 +1074,11 @@ def test_an_effect_with_a_shape_parameter_is_fitted_from_its_scan_and_from_its_s
     from watflex_sim.diagnosis.scan import SHAPE_LADDER
     from watflex_sim.diagnosis.screening import Candidate
 
-    rest = np.geomspace(0.02, 8.0, 200)  # s
-    truth = {"gain": 0.53, "time_constant": 0.67}
-
-    def rise(e):
-        return e["gain"] * (1 - np.exp(-rest / e["time_constant"]))
-
-    def evaluate(models):
-        return [rise(m.effects[-1]) - rise(truth) for m in models]
-
+    rest, truth, evaluate = DWELL_RESTS, DWELL_TRUTH, _dwell_rise
     def stays(data, evaluate, base, cand, rig_columns, iters, values):
         return {"effect": cand.effect, "where": cand.where, "model": cand.model(base, values), "cost": 0.0}
 
-    slots = {"gain": Slot(("effect", -1, "gain"), 0.0, 3.0), "time_constant": Slot(("effect", -1, "time_constant"), 0.05, 30.0, log=True)}
+    slots = _dwell_slots()
     data = SimpleNamespace(rig=SimpleNamespace(parameters={}), idle=set())
     for start, expected in (({"gain": 1.2, "time_constant": 2.0}, "rung"), (dict(truth), "start")):
         cand = Candidate("dwell_time_stiction", "elbow", {"gain": 0.5, "time_constant": 2.0}, slots, {"gain": 0.0},
