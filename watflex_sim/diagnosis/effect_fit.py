@@ -149,13 +149,13 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     to another period, 89 % off; around the datasheet's rig the best rung is 1.09 rad, amplitude and phase within
     16 % and 0.08 rad of the truth; fitted from there, 0.6 % off).
 
-    An effect with a shape parameter (`shape_name`: a time constant, a Stribeck velocity) is fitted twice, from the
-    values above and from its scan's best rung (`scan_shape`), and the fit of the least residual is kept: the two
-    can be ends of one long curved valley that Levenberg-Marquardt does not cross in its iterations, and at the
+    An effect with a shape parameter (scan.shape_name: a time constant, a Stribeck velocity) is fitted twice, from
+    the values above and from its scan's best rung (scan.scan_shape), and the fit of the least residual is kept: the
+    two can be ends of one long curved valley that Levenberg-Marquardt does not cross in its iterations, and at the
     scan's stage, with the rig re-solved to first order only, their costs do not tell which end fits (seed 63,
     watflex-bddd453b, a dwell-time stiction of gain 0.53 and time constant 0.67 s: the screening's 1.01 at 2 s costs
-    7,761, the best rung, 0.50 at 0.57 s, 8,222; fitted from the first, 1.22 at 1.91 s, from the rung 0.47 at 0.62 s, its residual a fifth of the
-    other's)."""
+    7,761, the best rung, 0.50 at 0.57 s, 8,222; fitted from the first, 1.22 at 1.91 s, cost 1,585; from the rung,
+    0.47 at 0.62 s, cost 286)."""
     rig = rig_slots(data)
     u_rig, lo_rig, hi_rig = internal_start(rig, [value_of(base, s) for s in rig])
     cost = lambda r: refit_cost(rig_columns, r, u_rig, lo_rig, hi_rig)  # noqa: E731
