@@ -1043,8 +1043,9 @@ def test_a_time_constant_is_found_by_a_scan_where_its_start_is_in_another_basin(
     Stand-in: the break-away's rise over 200 rests of 0.02-8 s, gain (1 - exp(-t / tau)), with the truth's 0.53 at
     0.67 s; from the screening's estimate at the start (gain 1.2, tau 2 s) the scan must land on a rung within
     SHAPE_LADDER^0.5 of the truth (the rungs are SHAPE_LADDER apart), its gain within 25 % of the truth's, and
-    cost less than a tenth of the start's. Fails where only a ripple's period was scanned (cost None, values kept)."""
-    from watflex_sim.diagnosis.scan import SHAPE_LADDER, scan_shape, shape_ladder
+    cost less than a tenth of the start's. Fails where only a ripple's period was scanned (cost None, values kept).
+    same_rung: the fit is started again from the rung only where it is another rung than the start's."""
+    from watflex_sim.diagnosis.scan import SHAPE_LADDER, same_rung, scan_shape, shape_ladder
     from watflex_sim.diagnosis.screening import Candidate
 
     rest, truth, evaluate = DWELL_RESTS, DWELL_TRUTH, _dwell_rise
@@ -1059,6 +1060,8 @@ def test_a_time_constant_is_found_by_a_scan_where_its_start_is_in_another_basin(
     assert abs(np.log(found["time_constant"] / truth["time_constant"])) <= 0.5 * np.log(SHAPE_LADDER) + 1e-9
     assert abs(found["gain"] / truth["gain"] - 1) < 0.25
     assert found_cost == pytest.approx(cost(evaluate([cand.model(Model(), found)])[0]))
+    # a second fit only from another rung: within half a rung (x1.41) the fit would start where the first does
+    assert same_rung(cand, {"time_constant": 2.0}, {"time_constant": 2.8}) and not same_rung(cand, start, found)
 
 
 def test_an_effect_with_a_shape_parameter_is_fitted_from_its_scan_and_from_its_start_and_the_better_kept():

@@ -20,7 +20,7 @@ from .data import Data, Model, fit_scores
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost,
                       rig_slots, value_of)
 from .runner import Gathered, Runner, evaluator, in_units
-from .scan import scan_period, scan_shape
+from .scan import same_rung, scan_period, scan_shape
 from .screening import Candidate
 from .tolerance import at_bounds
 
@@ -171,7 +171,7 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     failed = {"effect": cand.effect, "where": cand.where}
     starts = [values]
     rung, rung_cost = scan_shape(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig)
-    if rung_cost is not None and rung != values:
+    if rung_cost is not None and not same_rung(cand, rung, values):
         starts.append(rung)
     fits = []
     for start in starts:
