@@ -149,7 +149,7 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     to another period, 89 % off; around the datasheet's rig the best rung is 1.09 rad, amplitude and phase within
     16 % and 0.08 rad of the truth; fitted from there, 0.6 % off).
 
-    An effect with a shape parameter (scan.shape_name: a time constant, a Stribeck velocity) is fitted twice, from
+    An effect with a shape parameter (scan.candidate_shape: a time constant, a Stribeck velocity) is fitted twice, from
     the values above and from its scan's best rung (scan.scan_shape), and the fit of the least residual is kept: the
     two can be ends of one long curved valley that Levenberg-Marquardt does not cross in its iterations, and at the
     scan's stage, with the rig re-solved to first order only, their costs do not tell which end fits (seed 63,

@@ -15,7 +15,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from .data import Model
 from .fitting import Slot, refit_step
-from .period import shape_name as period_shape_name
+from .period import shape_name
 from .screening import Candidate
 
 PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
@@ -43,10 +43,10 @@ def period_ladder(slot: Slot, motion: float) -> list[float]:
     return periods
 
 
-def shape_name(cand: Candidate) -> str:
+def candidate_shape(cand: Candidate) -> str:
     """The candidate's shape parameter (period.shape_name: a dwell-time stiction's time constant, a Stribeck
     velocity), '' if it has none or does not fit it."""
-    name = period_shape_name(cand.effect)
+    name = shape_name(cand.effect)
     return name if name in cand.slots and name not in cand.quanta else ""
 
 
@@ -54,7 +54,7 @@ def same_rung(cand: Candidate, a: dict[str, float], b: dict[str, float]) -> bool
     """Whether the shape parameter of values `a` and `b` is within half a rung (SHAPE_LADDER) of each other: a fit
     from one starts where the other's does, at the scan's resolution (a laser hub's Stribeck v_s, 0.03 rad/s at the
     start, 0.023 at the best rung: a second fit of ~25 simulations for nothing)."""
-    name = shape_name(cand)
+    name = candidate_shape(cand)
     return abs(math.log(a[name] / b[name])) <= 0.5 * math.log(SHAPE_LADDER)
 
 
@@ -81,8 +81,13 @@ def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float]
         return values, None
     period, size, amp = param.name, cand.start["amplitude"], cand.slots["amplitude"]
     periods = period_ladder(cand.slots[period], cand.slots[period].low / param.low)  # the slot is in motion ranges
-    rung = lambda p: [({period: p, "amplitude": size, "phase": phase}, size) for phase in (0.0, math.pi / 2)]  # noqa: E731
-    as_own = lambda p, x: {period: p, **cand.ripple(*x)}  # noqa: E731
+
+    def rung(p: float) -> list[tuple[dict[str, float], float]]:
+        return [({period: p, "amplitude": size, "phase": phase}, size) for phase in (0.0, math.pi / 2)]
+
+    def as_own(p: float, x: np.ndarray) -> dict[str, float]:
+        return {period: p, **cand.ripple(*x)}
+
     fixed = [n for n in cand.neutral if n != "amplitude"]  # a spring beside the ripple: its own column
     return scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig), periods, rung, [amp, amp],
                       np.zeros(2), as_own, fixed)
@@ -90,13 +95,13 @@ def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float]
 
 def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
                rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> tuple[dict[str, float], float | None]:
-    """A shape parameter's value (`shape_name`) from a scan over `shape_ladder`: at a given shape the effect is, to
+    """A shape parameter's value (`candidate_shape`) from a scan over `shape_ladder`: at a given shape the effect is, to
     first order, linear in its neutral parameters, but the residual is far from convex in the shape (seeds 54, 55,
     62, 63: a Watflex dwell-time stiction's time constant of 0.6-0.7 s fitted at 1.5-2 s from its 2 s start, gain 2x
     too large; at the true time constant a gain near the truth fits better). Each rung is simulated once per neutral
     parameter (at its probe); the rest is `scan_rungs`', but the best rung is returned whatever the values given
     cost: the fit is started from both (`fit_candidate`). `values` unchanged, cost None, without a shape parameter."""
-    name = shape_name(cand)
+    name = candidate_shape(cand)
     if not name:
         return values, None
     own = list(cand.neutral)
