@@ -3,8 +3,8 @@
 Contract: `fit_candidate` fits one screened candidate (screening.Candidate) on top of the current model
 together with the rig's parameters and the effects found before, in noise units: a quantised parameter's
 step by search (`step_search`, again after the rest is fitted: `restep`), a ripple's period by a scan
-(scan.scan_period), a shape parameter's start by a scan too (scan.scan_shape: the fit runs from it and from the
-screening's values), the rest by Levenberg-Marquardt; it returns the fitted model and its Jacobian.
+(scan.scan_period), a shape parameter's starts by a scan too (scan.scan_shape: the fit runs from its contenders and
+from the screening's values), the rest by Levenberg-Marquardt; it returns the fitted model and its Jacobian.
 `fit_candidates` fits several at once, their simulations gathered (runner.Gathered), and adds each fitted
 model's simulations (scored by the caller, `scored`).
 """
@@ -149,13 +149,16 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     to another period, 89 % off; around the datasheet's rig the best rung is 1.09 rad, amplitude and phase within
     16 % and 0.08 rad of the truth; fitted from there, 0.6 % off).
 
-    An effect with a shape parameter (scan.candidate_shape: a time constant, a Stribeck velocity) is fitted twice, from
-    the values above and from its scan's best rung (scan.scan_shape), and the fit of the least residual is kept: the
-    two can be ends of one long curved valley that Levenberg-Marquardt does not cross in its iterations, and at the
-    scan's stage, with the rig re-solved to first order only, their costs do not tell which end fits (seed 63,
-    watflex-bddd453b, a dwell-time stiction of gain 0.53 and time constant 0.67 s: the screening's 1.01 at 2 s costs
-    7,761, the best rung, 0.50 at 0.57 s, 8,222; fitted from the first, 1.22 at 1.91 s, cost 1,585; from the rung,
-    0.47 at 0.62 s, cost 286)."""
+    An effect with a shape parameter (scan.candidate_shape: a time constant, a Stribeck velocity) is fitted from the
+    values above and from each of its scan's contenders (scan.scan_shape: 3 rungs, but one within half a rung of a start
+    already taken, `same_rung`), each start's first fit (`fit_from`) judged by its residual and only the least carried
+    on (`carry_on`: the fresh Jacobian and its iterations, ~2/3 of a fit, once): they can be ends of one long curved
+    valley that Levenberg-Marquardt does not cross in its iterations, and at the scan's stage, with the rig re-solved
+    to first order only, their costs do not tell which end fits (seed 63, watflex-bddd453b, a dwell-time stiction of
+    gain 0.53 and time constant 0.67 s: the screening's 1.01 at 2 s costs 7,761, the best rung, 0.50 at 0.57 s, 8,222;
+    fitted from the first, 1.22 at 1.91 s, cost 1,585; from the rung, 0.47 at 0.62 s, cost 286). Nor do they tell
+    which rung: seed 54's watflex-5c75d7b3 (0.60 at 0.39 s) scans cheapest at 1.13 s (731,806, then 0.57 s at 734,700);
+    fitted, the first ends at 1.30 at 1.39 s, |r|^2 35,808, the second at 0.63 at 0.44 s, 3,600."""
     rig = rig_slots(data)
     u_rig, lo_rig, hi_rig = internal_start(rig, [value_of(base, s) for s in rig])
     cost = lambda r: refit_cost(rig_columns, r, u_rig, lo_rig, hi_rig)  # noqa: E731
@@ -170,27 +173,43 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
             values, base = again, sheet
     failed = {"effect": cand.effect, "where": cand.where}
     starts = [values]
-    rung, rung_cost = scan_shape(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig)
-    if rung_cost is not None and not same_rung(cand, rung, values):
-        starts.append(rung)
-    fits = []
-    for start in starts:
-        try:
-            fits.append(fit_from(data, evaluate, base, cand, rig_columns, iters, start))
-        except Exception as exc:  # noqa: BLE001 - a candidate that fails is dropped and reported, never fatal
-            text = str(exc).splitlines()[0] if str(exc) else ""
-            fits.append({**failed, "error": f"{type(exc).__name__}: {text}"})
+    for rung, _ in scan_shape(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig):
+        if not any(same_rung(cand, rung, start) for start in starts):
+            starts.append(rung)
+    fits = [guarded(failed, fit_from, data, evaluate, base, cand, rig_columns, iters, start) for start in starts]
     fitted = [f for f in fits if "model" in f]
-    if len(fitted) < 2:
-        return fitted[0] if fitted else fits[0]
-    runs = evaluate([f["model"] for f in fitted])  # the fits' Huber costs have thresholds of their own starts
-    return fitted[int(np.argmin([math.inf if r is None else float(r @ r) for r in runs]))]
+    if not fitted:
+        return fits[0]
+    if len(fitted) > 1:  # the fits' Huber costs have thresholds of their own starts: judged by |r|^2
+        runs = evaluate([f["model"] for f in fitted])
+        fitted = [fitted[int(np.argmin([math.inf if r is None else float(r @ r) for r in runs]))]]
+    return guarded(failed, carry_on, evaluate, cand, fitted[0], iters)
+
+
+def guarded(failed: dict, fit, *args) -> dict:
+    """fit(*args), or `failed` with the error's first line: a candidate that fails is dropped and reported, never fatal."""
+    try:
+        return fit(*args)
+    except Exception as exc:  # noqa: BLE001
+        text = str(exc).splitlines()[0] if str(exc) else ""
+        return {**failed, "error": f"{type(exc).__name__}: {text}"}
+
+
+def carry_on(evaluate, cand: Candidate, first: dict, iters: int) -> dict:
+    """A first fit (`fit_from`) carried on by Levenberg-Marquardt from a fresh Jacobian, the quantised steps searched
+    again (`restep`): the rig's columns given to the first were taken without the effect (at a 0.33 kg Watflex payload
+    link 2's is another, and the payload lost to an actuator gain at 1.60 x the noise against 0.97 x once carried on);
+    starting from fresh columns alone lost Quanser's soft link 2."""
+    free = first["free"]
+    model, cost, J = levenberg(evaluate, first["model"], free, [value_of(first["model"], s) for s in free], None, iters)
+    model, cost, J = restep(evaluate, cand, free, model, cost, J, iters)
+    return {**first, "model": model, "cost": cost, "J": J}
 
 
 def fit_from(data: Data, evaluate, base: Model, cand: Candidate, rig_columns: np.ndarray, iters: int,
              values: dict[str, float]) -> dict:
-    """fit_candidate's fit from the candidate's `values` on top of `base`: Levenberg-Marquardt with the rig's
-    columns given, on from a fresh Jacobian, the quantised steps searched again (`restep`)."""
+    """fit_candidate's first fit from the candidate's `values` on top of `base`: Levenberg-Marquardt with the rig's
+    columns given (`carry_on` goes on from the best of these)."""
     rig = rig_slots(data)
     trial = cand.model(base, values)
     index = len(trial.effects) - 1
@@ -207,10 +226,5 @@ def fit_from(data: Data, evaluate, base: Model, cand: Candidate, rig_columns: np
     known = {len(effect_slots) + len(earlier) + i: rig_columns[:, i] for i in range(rig_columns.shape[1])}
     J = jacobian(evaluate, trial, free, u0, r, known)
     model, cost, J = levenberg(evaluate, trial, free, [s.to_value(x) for s, x in zip(free, u0)], J, iters, r)
-    # then on from a fresh Jacobian: the rig's columns above were taken without the effect (at a 0.33 kg
-    # Watflex payload link 2's is another, and the payload lost to an actuator gain at 1.60 x the noise
-    # against 0.97 x once carried on); starting from fresh columns alone lost Quanser's soft link 2
-    model, cost, J = levenberg(evaluate, model, free, [value_of(model, s) for s in free], None, iters)
-    model, cost, J = restep(evaluate, cand, free, model, cost, J, iters)
     return {**failed, "model": model, "n_params": len(cand.slots), "cost": cost, "screen_gain": cand.gain,
             "free": free, "J": J}

@@ -3,8 +3,8 @@
 Contract: `scan_period` scans a ripple's period (effects.Param.periodic), `scan_shape` a shape parameter
 (period.shape_name: a time constant, a Stribeck velocity); both run `scan_rungs`: at each rung the parameters the
 effect is linear in, to first order, are re-solved with the rig's columns by bounded least squares, the best rungs
-carried on by Gauss-Newton steps, and (values, their cost) returned for the fit to start from
-(effect_fit.fit_candidate). Costs are the caller's (`cost` of a residual, in the fit's noise units).
+carried on by Gauss-Newton steps (a shape's on the slopes at each), and (values, their cost) returned for the fit to
+start from (effect_fit.fit_candidate: a period's best, a shape's every contender). Costs are the caller's (`cost` of a residual, in the fit's noise units).
 """
 from __future__ import annotations
 
@@ -26,6 +26,9 @@ PERIOD_LONGEST = 8.0  # x the motion's range: ... up to this (a longer ripple is
 # spring and the screening's own start, 3 x the range, already stand for)
 PERIOD_CHECKED = 3  # the periods whose linear estimate fits best are simulated there ...
 PERIOD_STEPS = 2  # ... and moved on by this many Gauss-Newton steps (the scan's columns, one simulation each)
+LOCAL_STEP = 0.2  # a shape scan's Gauss-Newton steps take the size parameters' slopes at the contender, from a step
+# this share of their distance from neutral: the probe's secant from neutral is a poor slope where stick-slip makes the
+# residual bend (seed 59, a dwell's gain re-solved to ~0.5, its probe level, at every rung)
 SHAPE_LADDER = 2.0  # a shape parameter's scan (a time constant, a Stribeck velocity): the ratio of one rung to the next
 
 
@@ -67,6 +70,15 @@ def shape_ladder(slot: Slot) -> list[float]:
     return rungs
 
 
+def _nudge(x: np.ndarray, j: int, start: np.ndarray, low: float, high: float) -> np.ndarray:
+    """A step of coefficient j from `x` for its slope there: LOCAL_STEP of its distance from `start` (its neutral value),
+    at least LOCAL_STEP of its slot's width / 50, towards the slot's inside."""
+    h = np.zeros_like(x)
+    h[j] = LOCAL_STEP * max(abs(x[j] - start[j]), 0.02 * (high - low))
+    h[j] = -h[j] if x[j] + h[j] > high else h[j]
+    return h
+
+
 def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
                 rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> tuple[dict[str, float], float | None]:
     """A periodic parameter's value (a ripple a sin(2 pi x / period + phase), effects.Param.periodic) from a scan,
@@ -89,21 +101,23 @@ def scan_period(evaluate, cand: Candidate, base: Model, values: dict[str, float]
         return {period: p, **cand.ripple(*x)}
 
     fixed = [n for n in cand.neutral if n != "amplitude"]  # a spring beside the ripple: its own column
-    return scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig), periods, rung, [amp, amp],
-                      np.zeros(2), as_own, fixed)
+    found = scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig), periods, rung, [amp, amp],
+                       np.zeros(2), as_own, fixed)
+    return found[0] if found else (values, None)
 
 
 def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost,
-               rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> tuple[dict[str, float], float | None]:
+               rig_columns: np.ndarray, u_rig: np.ndarray, lo_rig: np.ndarray, hi_rig: np.ndarray) -> list[tuple[dict[str, float], float]]:
     """A shape parameter's value (`candidate_shape`) from a scan over `shape_ladder`: at a given shape the effect is, to
     first order, linear in its neutral parameters, but the residual is far from convex in the shape (seeds 54, 55,
     62, 63: a Watflex dwell-time stiction's time constant of 0.6-0.7 s fitted at 1.5-2 s from its 2 s start, gain 2x
     too large; at the true time constant a gain near the truth fits better). Each rung is simulated once per neutral
-    parameter (at its probe); the rest is `scan_rungs`', but the best rung is returned whatever the values given
-    cost: the fit is started from both (`fit_candidate`). `values` unchanged, cost None, without a shape parameter."""
+    parameter (at its probe); the rest is `scan_rungs`' (with the slopes at each contender: `local`), and its
+    PERIOD_CHECKED contenders are returned, (values, cost) least first, whatever the values given cost: the fit is
+    started from each (`fit_candidate`). [] without a shape parameter."""
     name = candidate_shape(cand)
     if not name:
-        return values, None
+        return []
     own = list(cand.neutral)
     slots = [cand.slots[n] for n in own]
 
@@ -115,12 +129,12 @@ def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float],
 
     return scan_rungs(evaluate, cand, base, values, cost, (rig_columns, u_rig, lo_rig, hi_rig),
                       shape_ladder(cand.slots[name]), rung, slots, np.array([cand.neutral[n] for n in own]), as_own, [],
-                      given=False)
+                      given=False, local=True)
 
 
 def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost, rig: tuple, rungs: list[float],
                rung_probes, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
-               given: bool = True) -> tuple[dict[str, float], float | None]:
+               given: bool = True, local: bool = False) -> list[tuple[dict[str, float], float]]:
     """The scan of one nonlinear parameter over `rungs`: one simulation with the effect at its neutral values, one per
     `fixed` parameter at its probe (a column shared by all rungs), and at each rung those of `rung_probes(v)`
     ((values, the probe's step) each: the rung's own columns); the columns, with the rig's (`rig`: columns, values,
@@ -128,15 +142,16 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     `rung_slots`; the PERIOD_CHECKED rungs whose estimate leaves the least residual are carried PERIOD_STEPS
     Gauss-Newton steps on (the same columns, the residual simulated at the estimate: stick-slip makes the first
     estimate rough; there, seed 52's ripple phase was 0.49 rad off and the estimate lost to a wrong period's), and the
-    one of least `cost` (of the residual) is kept, unless the values given cost less (`given`): (values, their cost).
-    `as_own(v, coefficients)` gives the effect's values at rung v."""
+    contenders and (`given`) the values given are returned as (values, their `cost` of the residual), least first; none
+    where the effect at neutral diverges. `as_own(v, coefficients)` gives the effect's values at rung v. With `local`,
+    the steps take the rung's coefficients' slopes at the contender (`_nudge`), not the probes' secants from neutral."""
     rig_columns, u_rig, lo_rig, hi_rig = rig
     zero = {**values, **cand.neutral}
     probes = [(v, rung_probes(v)) for v in rungs]
     runs = evaluate([cand.model(base, zero)] + [cand.model(base, {**zero, n: cand.probe(n)}) for n in fixed]
                     + [cand.model(base, {**zero, **p}) for _, ps in probes for p, _ in ps])
     if any(r is None for r in runs[:1 + len(fixed)]):
-        return values, None
+        return []
     r0, shared = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(fixed, runs[1:])]
     slots = [cand.slots[n] for n in fixed] + rung_slots
     lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
@@ -157,11 +172,21 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
             ranked.append((*estimate(columns, r0, start), v, columns))
     ranked.sort(key=lambda x: x[0])
     contenders = [(v, x, columns) for _, x, v, columns in ranked[:PERIOD_CHECKED]]
+    own = range(len(fixed), len(start)) if local else range(0)
     for _ in range(PERIOD_STEPS):  # Gauss-Newton steps with the probes' columns: a linear estimate in a closed loop
-        runs = evaluate([cand.model(base, as_values(v, x)) for v, x, _ in contenders])  # with stick-slip is rough
-        contenders = [(v, x if r is None else estimate(columns, r, x)[1], columns) for (v, x, columns), r in zip(contenders, runs)]
+        nudges = [[_nudge(x, j, start, lo[len(u_rig) + j], hi[len(u_rig) + j]) for j in own] for _, x, _ in contenders]
+        runs = evaluate([cand.model(base, as_values(v, x)) for v, x, _ in contenders]  # with stick-slip is rough
+                        + [cand.model(base, as_values(v, x + h)) for (v, x, _), hs in zip(contenders, nudges) for h in hs])
+        at, nudged = runs[:len(contenders)], iter(runs[len(contenders):])
+        moved = []
+        for (v, x, columns), r, hs in zip(contenders, at, nudges):
+            local_columns = columns.copy()
+            for j, h in zip(own, hs):  # the secant from neutral to the probe replaced by the slope at x
+                r_h = next(nudged)
+                if r is not None and r_h is not None:
+                    local_columns[:, len(u_rig) + j] = (r_h - r) / h[j]
+            moved.append((v, x if r is None else estimate(local_columns, r, x)[1], columns))
+        contenders = moved
     tried = [values] * given + [as_values(v, x) for v, x, _ in contenders]
-    if not tried:
-        return values, None
     costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
-    return tried[int(np.argmin(costs))], min(costs)
+    return sorted(zip(tried, costs), key=lambda vc: vc[1])
