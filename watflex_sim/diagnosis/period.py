@@ -35,17 +35,6 @@ def periodic_name(effect: dict) -> str:
     return next((p.name for p in CATALOGUE[effect["effect"]][1] if p.periodic and p.name in effect), "")
 
 
-def shape_name(effect: str) -> str:
-    """The catalogue effect's shape parameter, '' if it has none: log-scaled, with no neutral value, neither quantised
-    nor periodic, beside parameters that set the effect's size and vanish at a neutral value (a dwell-time
-    stiction's time constant beside its gain, a Stribeck friction's v_s beside its break-aways). The residual
-    bends along it: at each value the sizes act differently."""
-    params = CATALOGUE[effect][1]
-    if not any(p.neutral is not None for p in params):
-        return ""
-    return next((p.name for p in params if p.log and p.neutral is None and not p.periodic and not p.quantum), "")
-
-
 def profile_ladder(slot: Slot, estimate: float, steps: range) -> list[float]:
     """Periods estimate x PROFILE_RATIO^k for k in `steps`, within the slot's bounds."""
     return sorted({min(max(estimate * PROFILE_RATIO**k, slot.low), slot.high) for k in steps})

@@ -1,10 +1,11 @@
 """Scans of a candidate's nonlinear parameter: where a fit starts when the residual is far from convex in it.
 
 Contract: `scan_period` scans a ripple's period (effects.Param.periodic), `scan_shape` a shape parameter
-(period.shape_name: a time constant, a Stribeck velocity); both run `scan_rungs`: at each rung the parameters the
+(`candidate_shape`: a time constant, a Stribeck velocity); both run `scan_rungs`: at each rung the parameters the
 effect is linear in, to first order, are re-solved with the rig's columns by bounded least squares, the best rungs
 carried on by Gauss-Newton steps (a shape's on the slopes at each), and (values, their cost) returned for the fit to
-start from (effect_fit.fit_candidate: a period's best, a shape's every contender). Costs are the caller's (`cost` of a residual, in the fit's noise units).
+start from (effect_fit.fit_candidate: a period's best, a shape's every contender). Costs are the caller's (`cost` of a
+residual, in the fit's noise units).
 """
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ import numpy as np
 from ..effects import CATALOGUE
 from .data import Model
 from .fitting import Slot, refit_step
-from .period import shape_name
 from .screening import Candidate
 
 PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
@@ -47,9 +47,14 @@ def period_ladder(slot: Slot, motion: float) -> list[float]:
 
 
 def candidate_shape(cand: Candidate) -> str:
-    """The candidate's shape parameter (period.shape_name: a dwell-time stiction's time constant, a Stribeck
-    velocity), '' if it has none or does not fit it."""
-    name = shape_name(cand.effect)
+    """The candidate's shape parameter, '' if it has none or does not fit it: log-scaled, with no neutral value,
+    neither quantised nor periodic, beside parameters that set the effect's size and vanish at a neutral value (a
+    dwell-time stiction's time constant beside its gain, a Stribeck friction's v_s beside its break-aways). The
+    residual bends along it: at each value the sizes act differently."""
+    params = CATALOGUE[cand.effect][1]
+    if not any(p.neutral is not None for p in params):
+        return ""
+    name = next((p.name for p in params if p.log and p.neutral is None and not p.periodic and not p.quantum), "")
     return name if name in cand.slots and name not in cand.quanta else ""
 
 
@@ -172,16 +177,16 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
             ranked.append((*estimate(columns, r0, start), v, columns))
     ranked.sort(key=lambda x: x[0])
     contenders = [(v, x, columns) for _, x, v, columns in ranked[:PERIOD_CHECKED]]
-    own = range(len(fixed), len(start)) if local else range(0)
+    sizes = range(len(fixed), len(start)) if local else range(0)  # the coefficients whose slopes are taken at x
     for _ in range(PERIOD_STEPS):  # Gauss-Newton steps with the probes' columns: a linear estimate in a closed loop
-        nudges = [[_nudge(x, j, start, lo[len(u_rig) + j], hi[len(u_rig) + j]) for j in own] for _, x, _ in contenders]
+        nudges = [[_nudge(x, j, start, lo[len(u_rig) + j], hi[len(u_rig) + j]) for j in sizes] for _, x, _ in contenders]
         runs = evaluate([cand.model(base, as_values(v, x)) for v, x, _ in contenders]  # with stick-slip is rough
                         + [cand.model(base, as_values(v, x + h)) for (v, x, _), hs in zip(contenders, nudges) for h in hs])
         at, nudged = runs[:len(contenders)], iter(runs[len(contenders):])
         moved = []
         for (v, x, columns), r, hs in zip(contenders, at, nudges):
             local_columns = columns.copy()
-            for j, h in zip(own, hs):  # the secant from neutral to the probe replaced by the slope at x
+            for j, h in zip(sizes, hs):  # the secant from neutral to the probe replaced by the slope at x
                 r_h = next(nudged)
                 if r is not None and r_h is not None:
                     local_columns[:, len(u_rig) + j] = (r_h - r) / h[j]
