@@ -177,3 +177,22 @@ def test_the_reach_goes_on_to_where_the_cost_crosses_its_limit_between_two_point
     f = (1.96**2 / 2 * r.size / (r.size - 1) - 1.0) / (10.0 - 1.0)
     assert low == pytest.approx(1.0)
     assert high == pytest.approx(math.exp(math.log(1.12) + f * math.log(1.25 / 1.12)), rel=1e-9)
+
+
+def test_the_reach_stops_at_a_point_within_when_the_next_ones_limit_is_below_its_cost(monkeypatch):
+    """profile_reach(): each point has a limit of its own (our discretisation shifts each difference by its own
+    |g.error|), so a neighbour beyond can have a limit below this point's cost: the crossing is then at the point, not
+    extrapolated past it (seed 59's pair, watflex-26f64029: a time constant's reach went from 1.13 s down to 0.076 s,
+    f = -7.8). Points at 1, 1.12 and 1.25 with costs 0, 3 and 4; the discretisation lifts the limit of the second to
+    3.92, not the third's (1.92): the reach must end at 1.12."""
+    from watflex_sim.diagnosis import period
+
+    r = np.tile([1.0, -1.0], 50_000)
+    error, q1, q2 = np.zeros(4), np.zeros(4), np.zeros(4)
+    error[0], q1[0], q2[1] = 1.0, 2.0, 1.0  # g.error: 2 for the second point, 0 for the third
+    rows = [(p, Model([{"effect": "position_dependent_friction", "where": "hub", "period": p}], {}), c, q)
+            for p, c, q in ((1.0, 0.0, np.zeros(4)), (1.12, 3.0, q1), (1.25, 4.0, q2))]
+    monkeypatch.setattr(period, "_walk", lambda *args: rows)
+    slot = Slot(("effect", 0, "period"), 0.1, 10.0, log=True)
+    low, high = period.profile_reach(None, None, 0, [slot], None, r, [], error)[0]
+    assert (low, high) == (pytest.approx(1.0), pytest.approx(1.12))

@@ -99,11 +99,18 @@ def period_profile(evaluate, model: Model, index: int, slots: list[Slot], J: np.
         left, step = refit_step(columns, r0, start, lo, hi)
         solved.append((left, p, columns, start + step))
     solved = [x[1:] for x in sorted(solved, key=lambda x: x[0])[:checked]] if checked else [x[1:] for x in solved]
+    return stepped(evaluate, solved, at, lo, hi)
+
+
+def stepped(evaluate, solved: list, at, lo: np.ndarray, hi: np.ndarray) -> list[tuple[float, Model, float, np.ndarray]]:
+    """A profile's points from its solves: for each (value, columns, x) of `solved` whose model `at(value, x)` runs,
+    one Gauss-Newton step more on those columns from a simulation there, within the bounds lo, hi: (value, the model
+    stepped, the step's linear prediction of the cost 0.5 |r + J d|^2, r + J d)."""
     out = []
-    for (p, columns, x), r in zip(solved, evaluate([at(p, x) for p, _, x in solved])):
+    for (v, columns, x), r in zip(solved, evaluate([at(v, x) for v, _, x in solved])):
         if r is not None:
             left, step = refit_step(columns, r, x, lo, hi)
-            out.append((p, at(p, x + step), 0.5 * left, r + columns @ step))
+            out.append((v, at(v, x + step), 0.5 * left, r + columns @ step))
     return out
 
 
@@ -145,24 +152,31 @@ def neutral_others(data, effect: dict) -> dict[str, float]:
 
 def _walk(evaluate, model: Model, index: int, slots: list[Slot], J: np.ndarray, r: np.ndarray,
           replicates: list[np.ndarray], error: np.ndarray | None, held: dict[str, float]) -> list:
-    """period_profile's points: PROFILE_STEPS periods either side of the estimate, then PROFILE_MORE more on a side
-    whose outermost is `within`, PROFILE_ROUNDS times at most."""
+    """period_profile's points along effect `index`'s period (`walk`)."""
     slot = next(s for s in slots if s.where[:2] == ("effect", index) and s.name == periodic_name(model.effects[index]))
     estimate = model.effects[index][slot.name]
-    periods = profile_ladder(slot, estimate, range(-PROFILE_STEPS, PROFILE_STEPS + 1))
-    points = period_profile(evaluate, model, index, slots, J, periods, held)
+    return walk(lambda periods: period_profile(evaluate, model, index, slots, J, periods, held),
+                lambda steps: profile_ladder(slot, estimate, steps), (slot.low, slot.high), r, len(slots), replicates, error)
+
+
+def walk(profile, ladder, bounds: tuple[float, float], r: np.ndarray, p: int, replicates: list[np.ndarray],
+         error: np.ndarray | None) -> list:
+    """A profile's points (`profile(values)`: (value, model, cost, residual) each) at `ladder(steps)`: PROFILE_STEPS
+    values either side of the estimate, then PROFILE_MORE more on a side whose outermost is `within` and not at one of
+    `bounds`, PROFILE_ROUNDS times at most."""
+    points = profile(ladder(range(-PROFILE_STEPS, PROFILE_STEPS + 1)))
     reach = {"low": -PROFILE_STEPS, "high": PROFILE_STEPS}
     for _ in range(PROFILE_ROUNDS if points else 0):
-        ok = dict(zip([x[0] for x in points], within(points, r, len(slots), replicates, error)))
+        ok = dict(zip([x[0] for x in points], within(points, r, p, replicates, error)))
         more = []
         for side, sign in (("low", -1), ("high", 1)):
             outer = min(ok) if side == "low" else max(ok)
-            if ok[outer] and outer not in (slot.low, slot.high):
-                more += profile_ladder(slot, estimate, range(reach[side] + sign, reach[side] + sign * (PROFILE_MORE + 1), sign))
+            if ok[outer] and outer not in bounds:
+                more += ladder(range(reach[side] + sign, reach[side] + sign * (PROFILE_MORE + 1), sign))
                 reach[side] += sign * PROFILE_MORE
         if not more:
             break
-        points += period_profile(evaluate, model, index, slots, J, sorted(set(more) - set(ok)), held)
+        points += profile(sorted(set(more) - set(ok)))
     return points
 
 
@@ -178,20 +192,29 @@ def profile_reach(evaluate, model: Model, index: int, slots: list[Slot], J: np.n
     laser_arm-a39fc2ab, a period interval reaching 19.89 mrad, the truth 19.93). Profiled: the period, and with it
     the amplitude, phase, a spring and every other effect's parameters."""
     walks = [_walk(evaluate, model, index, slots, J, r, replicates, error, variant) for variant in ([{}, held] if held else [{}])]
-    bound = iter(limits([x for walk in walks for x in walk], r, len(slots), replicates, error))
+    return reach_of(walks, slots, r, replicates, error)
+
+
+def reach_of(walks: list[list], slots: list[Slot], r: np.ndarray, replicates: list[np.ndarray],
+             error: np.ndarray | None) -> dict[int, tuple[float, float]]:
+    """Per effect slot (index into `slots`), the range of its values over the points of `walks` (profiles' points,
+    (value, model, cost, residual) each) that the data cannot tell from the best of them all (`limits`), and on to
+    where the cost, linear between a point within and its neighbour beyond, crosses the limit."""
+    bound = iter(limits([x for w in walks for x in w], r, len(slots), replicates, error))
     effect_slots = [k for k, s in enumerate(slots) if s.where[0] == "effect"]
     reached: dict[int, list[float]] = {k: [] for k in effect_slots}
-    for walk in walks:
-        rows = sorted(((x[0], x[1], x[2], next(bound)) for x in walk), key=lambda x: x[0])
+    for w in walks:
+        rows = sorted(((x[0], x[1], x[2], next(bound)) for x in w), key=lambda x: x[0])
         for k in effect_slots:
             u = [slots[k].to_internal(value_of(m, slots[k])) for _, m, _, _ in rows]
             for n, (_, _, cost, limit) in enumerate(rows):
                 if cost > limit:
                     continue
                 reached[k].append(u[n])
-                for m in (n - 1, n + 1):  # toward a neighbour beyond the limit: where the cost crosses it
+                for m in (n - 1, n + 1):  # toward a neighbour beyond the limit: where the cost crosses it (the
+                    # limits differ point by point: one below this point's cost crosses here, not past it)
                     if 0 <= m < len(rows) and rows[m][2] > rows[m][3]:
-                        f = (rows[m][3] - cost) / (rows[m][2] - cost)
+                        f = min(max((rows[m][3] - cost) / (rows[m][2] - cost), 0.0), 1.0)
                         reached[k].append(u[n] + f * (u[m] - u[n]))
     return {k: (max(slots[k].to_value(min(v)), slots[k].low), min(slots[k].to_value(max(v)), slots[k].high))
             for k, v in reached.items() if v}

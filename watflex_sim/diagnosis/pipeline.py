@@ -201,7 +201,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         trained = current
         if current.effects:
             say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")
-            current, sims = final_refit(data, runner, current, sims)
+            current, sims, trained = final_refit(data, runner, current, sims)
             steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
         say("intervals", "95 % intervals from the Jacobian at the final model and the training-only fit")
         ranges = final_intervals(data, runner, current, sims, trained)

@@ -16,6 +16,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from .data import Model
 from .fitting import Slot, refit_step
+from .level import shape_name
 from .screening import Candidate
 
 PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
@@ -47,15 +48,10 @@ def period_ladder(slot: Slot, motion: float) -> list[float]:
 
 
 def candidate_shape(cand: Candidate) -> str:
-    """The candidate's shape parameter, '' if it has none or does not fit it: log-scaled, with no neutral value,
-    neither quantised nor periodic, beside parameters that set the effect's size and vanish at a neutral value (a
-    dwell-time stiction's time constant beside its gain, a Stribeck friction's v_s beside its break-aways). The
-    residual bends along it: at each value the sizes act differently."""
-    params = CATALOGUE[cand.effect][1]
-    if not any(p.neutral is not None for p in params):
-        return ""
-    name = next((p.name for p in params if p.log and p.neutral is None and not p.periodic and not p.quantum), "")
-    return name if name in cand.slots and name not in cand.quanta else ""
+    """The candidate's shape parameter (level.shape_name), '' if it has none or does not fit it. The residual bends
+    along it: at each value the sizes act differently."""
+    name = shape_name(cand.effect)
+    return name if name and name in cand.slots and name not in cand.quanta else ""
 
 
 def same_rung(cand: Candidate, a: dict[str, float], b: dict[str, float]) -> bool:

@@ -1,0 +1,100 @@
+"""A shape or quantised parameter profiled (diagnosis/level.py): the 95 % intervals along a valley no Jacobian sees.
+
+Stand-ins: a dwell-time stiction's extra break-away gain x (1 - e^(-T / time constant)) after rests T, against the
+truth's, plus a rig parameter's column; and a delayed command, against the truth's delay. Each is smooth in
+everything but the profiled parameter, so a first-order re-solve at each of its values is near exact.
+"""
+import math
+
+import numpy as np
+
+from watflex_sim.diagnosis import Model, Slot, level
+from watflex_sim.diagnosis.fitting import intervals
+from watflex_sim.diagnosis.level import level_profile, level_reach, level_start, shape_name
+
+from test_period_profile import jacobian_of  # central differences in internal units
+
+RESTS = np.repeat(np.linspace(0.3, 0.9, 7), 60)  # s: the rests before each break-away (seed 59's staircase: 0.3-0.9 s)
+BEND = np.linspace(-1.0, 1.0, RESTS.size) ** 2  # a rig parameter's column: any shape the dwell's is not
+
+
+def test_shape_names():
+    """The shape parameter beside an effect's sizes: a dwell's time constant, a Stribeck velocity; none for a delay
+    (quantised, no size beside it) or a ripple (its period is profiled by period.py)."""
+    assert shape_name("dwell_time_stiction") == "time_constant"
+    assert shape_name("stribeck_friction") == "v_s"
+    assert shape_name("delay") == ""
+    assert shape_name("position_dependent_friction") == ""
+
+
+def test_a_time_constants_profile_reaches_along_its_valley_where_the_jacobian_cannot():
+    """level_reach(): rests of 0.3-0.9 s only (seed 59, watflex-1e32daae: 0.29 / 0.58 s fitted for a gain of 0.51 and
+    0.98 s; a fit from 1.13 s ends 0.06 % costlier) leave the gain and the time constant along a curved valley. The
+    estimate at 0.5 s (its best gain there, 0.33) sits ~16 cost units up the valley's wall under noise of 0.05 (the
+    gain's units); the Jacobian's interval there stops short of the truth (0.5 at 1.0 s). The profile's range must
+    reach it, the gain's follow to 0.5, and both stop short of what the noise resolves (a time constant of 0.25 s or
+    2 s: two rungs of LEVEL_RATIO from the truth)."""
+    truth = {"gain": 0.5, "time_constant": 1.0}
+    noise = np.random.default_rng(5).normal(0.0, 0.05, RESTS.size)
+
+    def dwell(e: dict) -> np.ndarray:
+        return e["gain"] * (1.0 - np.exp(-RESTS / e["time_constant"]))
+
+    def evaluate(models):
+        return [(dwell(m.effects[0]) + (m.parameters.get("elbow_friction", 1.0) - 1.0) * BEND - dwell(truth) + noise) / 0.05
+                for m in models]
+
+    slots = [Slot(("effect", 0, "gain"), 0.0, 3.0), Slot(("effect", 0, "time_constant"), 0.05, 30.0, log=True),
+             Slot(("param", "elbow_friction"), 0.9, 1.1)]
+    start = Model([{"effect": "dwell_time_stiction", "where": "elbow", "gain": 0.3, "time_constant": 0.5}], {"elbow_friction": 1.0})
+    estimate = level_profile(evaluate, start, 0, "time_constant", slots, jacobian_of(evaluate, start, slots), [0.5])[0][1]
+    assert 0.3 < estimate.effects[0]["gain"] < 0.36  # the gain that fits best at 0.5 s
+    r, J = evaluate([estimate])[0], jacobian_of(evaluate, estimate, slots)
+    assert intervals(slots, estimate, J, r)[1][1] < truth["time_constant"]  # the Jacobian's interval misses it
+    reach, kept = level_reach(evaluate, estimate, 0, "time_constant", (0.05, 30.0), 0.0, slots, J, r, [], None)
+    assert 0.25 < reach[1][0] < truth["time_constant"] < reach[1][1] < 2.0
+    assert reach[0][0] < truth["gain"] < reach[0][1]
+    assert any(abs(k - 1.0) < 1e-9 for k in kept) and all(0.25 < k < 2.0 for k in kept)
+
+
+def test_a_delays_interval_holds_every_step_the_noise_cannot_tell_from_the_found_one():
+    """level_reach() on a quantised parameter: a command delayed 11 ms found at 10 ms (seed 64, watflex-7c2659f4,
+    [9.5, 10.5] ms) where a step of 1 ms moves the residual by about the noise: the steps within the limit must hold
+    11 ms and none 4 ms or more away (each such step costs ~16 x what a step does, beyond 1.92 x the noise)."""
+    t = np.arange(0.0, 2.0, 0.001)
+    noise = np.random.default_rng(2).normal(0.0, 1.0, t.size)
+
+    def command(delay: float) -> np.ndarray:
+        return 600.0 * np.sin(2 * np.pi * 0.5 * (t - delay)) / math.sqrt(t.size)
+
+    def evaluate(models):
+        return [command(m.effects[0]["seconds"]) - command(0.011) + noise for m in models]
+
+    estimate = Model([{"effect": "delay", "where": "command", "seconds": 0.010}], {})
+    r = evaluate([estimate])[0]
+    reach, kept = level_reach(evaluate, estimate, 0, "seconds", (0.0, 0.05), 0.001, [], np.zeros((t.size, 0)), r, [], None)
+    assert reach == {}
+    assert any(abs(k - 0.011) < 1e-9 for k in kept)
+    assert all(abs(k - 0.010) < 0.0035 for k in kept)
+
+
+def test_the_final_refit_starts_again_from_a_step_the_profile_says_costs_less_beyond_the_noise(monkeypatch):
+    """level_start(): a command delayed 11 ms kept at 10 ms (seed 64, watflex-7c2659f4: the 10 ms step costs 3.5 x the
+    11 ms one's 0.5 |r|^2 of 2,668) is restarted from 11 ms; at 11 ms, and where the 11 ms step gains less than the
+    noise resolves (1.96^2 / 2 x s^2, 1.92 here), there is nothing to restart from."""
+    monkeypatch.setattr(level, "scale_of", lambda data, param, where: 1.0)  # seconds are seconds on any rig
+    t = np.arange(0.0, 2.0, 0.001)
+    noise = np.random.default_rng(2).normal(0.0, 1.0, t.size)
+
+    def evaluate_for(amplitude: float):
+        def command(delay: float) -> np.ndarray:
+            return amplitude * np.sin(2 * np.pi * 0.5 * (t - delay)) / math.sqrt(t.size)
+        return lambda models: [command(m.effects[0]["seconds"]) - command(0.011) + noise for m in models]
+
+    def start(evaluate, seconds: float):
+        model = Model([{"effect": "delay", "where": "command", "seconds": seconds}], {})
+        return level_start(None, evaluate, model, [], np.zeros((t.size, 0)), evaluate([model])[0])
+
+    assert start(evaluate_for(2000.0), 0.010).effects[0]["seconds"] == 0.011
+    assert start(evaluate_for(2000.0), 0.011) is None
+    assert start(evaluate_for(300.0), 0.010) is None  # 0.5 |r|^2 differs by ~0.22 per step
