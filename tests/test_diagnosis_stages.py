@@ -36,7 +36,7 @@ def test_prepare_is_the_same_whatever_the_file_order(laser_recordings):
 
 def test_every_recording_is_both_fitted_and_validated(laser_recordings):
     """Blocks in every recording (not a held-out file): about half of each recording's samples
-    train, the other half validate; the first block trains; a periodic experiment whose period
+    train, the other half validate; a periodic experiment whose period
     is two blocks (pulses every 0.2 s with 0.1 s blocks: the EMPS PULSES run against strictly
     alternate blocks) has pulses in both halves."""
     data = prepare(laser_recordings, ["a", "b"])
@@ -44,7 +44,7 @@ def test_every_recording_is_both_fitted_and_validated(laser_recordings):
         assert 0.4 < mask.mean() < 0.6
     t = np.arange(0, 6.0, 1e-3)
     mask, block = split_blocks(t)
-    assert block == pytest.approx(0.1, rel=1e-3) and mask[:100].all()
+    assert block == pytest.approx(0.1, rel=1e-3)
     pulses = (t % 0.2) < 0.01
     assert 0.3 < (pulses & mask).sum() / pulses.sum() < 0.7
 
@@ -54,15 +54,28 @@ def test_recordings_of_one_length_are_split_each_its_own_way(laser_recordings):
     step's onset, at the same time in each, in one half in all of them (seed 58: a 2 ms laser sensor delay
     seen at the onsets only, 0.08-0.15 s, was fitted on every onset, validated on none, and rejected). The
     two 0.4 s recordings (20 ms blocks) differ; the same recording always splits the same way; over eight
-    salts, the second block (the rest of an onset the first, always fitted, block holds) validates in some."""
+    salts, the 0.1-0.2 s of a 6 s recording (a laser step's transient) fits in some and validates in others."""
     data = prepare(laser_recordings, ["a.csv", "b.csv"])
     assert not np.array_equal(data.train[0], data.train[1])
     again = prepare(laser_recordings, ["a.csv", "b.csv"])
     assert all(np.array_equal(x, y) for x, y in zip(data.train, again.train))
     t = np.arange(0, 6.0, 1e-3)
-    second = (t >= 0.1) & (t < 0.2)
-    fitted = [split_blocks(t, salt)[0][second].all() for salt in range(8)]
-    assert 0 < sum(fitted) < 8
+    onset = (t >= 0.1) & (t < 0.2)
+    fitted = [split_blocks(t, salt)[0][onset].mean() for salt in range(8)]
+    assert min(fitted) < 0.5 < max(fitted)
+
+
+def test_every_stretch_of_three_blocks_is_in_both_halves():
+    """Blocks are split in pairs, one fitting and one validating, so no run of one half is longer than two
+    blocks: a 0.3 s transient of a 6 s recording (0.1 s blocks) is always seen by both. With each block's
+    half drawn alone, 9 blocks in a row validated on seed 65's watflex-6b7dd386 (0.5-1.4 s, a whole step
+    transient), and the refit, fitted without it, was 1.40 x the noise there on a clean case (0.73 x paired)."""
+    t = np.arange(0, 6.0, 1e-3)
+    for salt in range(20):
+        mask, block = split_blocks(t, salt)
+        runs = np.diff(np.flatnonzero(np.diff(np.r_[-1, mask.astype(int), -1])))  # samples in each run of one half
+        assert runs.max() <= 2 * block / 1e-3 + 1
+        assert 0.45 < mask.mean() < 0.55
 
 
 def test_noise_is_measured_from_the_data():

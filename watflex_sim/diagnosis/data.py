@@ -23,7 +23,8 @@ from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
-BLOCKS_PER_RECORDING = 60  # alternate blocks per recording (train, validate, train, ...): short enough that a transient is split
+BLOCKS_PER_RECORDING = 60  # blocks per recording, in pairs of one training and one validation block (split_blocks):
+# short enough that a transient is split
 BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way (salted with its content)
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
@@ -92,23 +93,26 @@ def measured_noise(values: np.ndarray) -> float:
 
 
 def split_blocks(time: np.ndarray, salt: int = 0) -> tuple[np.ndarray, float]:
-    """Training mask of one recording and the block length (s): blocks of equal length, half of them
-    (a pseudo-random choice fixed by SPLIT_SEED and `salt`, the first block always training) fit and half
-    validate, so a periodic experiment (pulses, a triangle wave) cannot fall into one half only, as it would
-    with strictly alternate blocks; samples after FIT_SECONDS only validate. `prepare` salts each recording
-    with its content: recordings of one length split alike put what happens at the same time in each (a
-    step's onset) in the same half (seed 58: a 2 ms laser sensor delay, seen at the steps' onset only, was
-    fitted on every onset and validated on none, and rejected)."""
+    """Training mask of one recording and the block length (s): blocks of equal length taken in pairs, one
+    block of each pair fitting and the other validating, which one a pseudo-random choice fixed by SPLIT_SEED
+    and `salt`, as is where the pairs start (up to two blocks in); samples after FIT_SECONDS only validate.
+    Pairs bound a run of one half to two blocks, so every stretch the rig spends in one regime (a step's
+    transient, a reversal) is seen by both halves: blocks drawn one by one left 0.5-1.4 s of a Watflex step, its
+    whole transient, to validation, and the refit fitted without it was 1.40 x the noise there on a clean case
+    (seed 65, watflex-6b7dd386; 0.73 x paired). A random order within each pair keeps a periodic experiment
+    (pulses, a triangle wave) from falling into one half, as it would with strictly alternate blocks. `prepare`
+    salts each recording with its content, and the random start keeps blocks off an experiment's round times:
+    recordings of one length split alike put what happens at the same time in each (a step's onset) in the same
+    half (seed 58: a 2 ms laser sensor delay, seen at the steps' onset only, was fitted on every onset and
+    validated on none, and rejected; pairs whose first block always fitted put every laser step's transient,
+    0.1-0.2 s, in validation: seed 65's beam stiffness x2.86, found before, `unexplained`)."""
     t = time - time[0]
     block = float(np.clip(t[-1] / BLOCKS_PER_RECORDING, *BLOCK_LIMITS_S))
-    index = (t // block).astype(int)
-    n = int(index[-1]) + 1
-    order = np.random.default_rng([SPLIT_SEED, salt]).permutation(n)
-    training = np.zeros(n, bool)
-    training[order[: (n + 1) // 2]] = True
-    if not training[0]:  # the start (initial conditions) is always fitted: swap it with a training block
-        training[order[(n + 1) // 2 - 1]], training[0] = False, True
-    return training[index] & (t < FIT_SECONDS), block
+    rng = np.random.default_rng([SPLIT_SEED, salt])
+    index = ((t + rng.uniform(0.0, 2.0 * block)) // block).astype(int)
+    first = rng.integers(0, 2, int(index[-1]) // 2 + 1).astype(bool)  # per pair: whether its first block fits
+    training = np.where(index % 2 == 0, first[index // 2], ~first[index // 2])
+    return training & (t < FIT_SECONDS), block
 
 
 def prepare(recordings: list[Recording], names: list[str]) -> Data:

@@ -112,6 +112,7 @@ def level_start(data: Data, evaluate, model: Model, slots: list[Slot], J: np.nda
     estimate's own profiled cost by more than the noise resolves (1.96^2 / 2 x s^2); None where none is. `r`: the
     model's residual in `evaluate`'s units, J its Jacobian over `slots` (internal units)."""
     best, least = None, 0.5 * float(r @ r)
+    resolved = 1.96**2 / 2 * residual_variance(r, len(slots))  # a cost difference the noise resolves
     for i, effect in enumerate(model.effects):
         for name, bounds, quantum in levels(data, effect):
             points = level_profile(evaluate, model, i, name, slots, J,
@@ -120,6 +121,6 @@ def level_start(data: Data, evaluate, model: Model, slots: list[Slot], J: np.nda
             if not own:
                 continue
             for _, m, cost, _ in points:
-                if cost < min(least, own[0] - 1.96**2 / 2 * residual_variance(r, len(slots))):
+                if cost < min(least, own[0] - resolved):
                     best, least = m, cost
     return best
