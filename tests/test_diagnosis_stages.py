@@ -794,6 +794,8 @@ def test_signatures_are_differences_at_one_discretisation(monkeypatch):
     cands = [Candidate(name, "hub", {key: 0.2}, {key: Slot(("effect", -1, key), 0.0, 1.0)}, {key: 0.0})
              for name, key in (("viscous_friction", "damping"), ("coulomb_friction", "level"))]
     class Runner:  # a rig whose model has a coarser discretisation
+        fidelity = 1.0
+
         def refinable(self, factor):
             return factor == SCREEN_FINER
 
@@ -1421,3 +1423,51 @@ def test_in_a_round_for_local_windows_a_finding_must_remove_their_excess(monkeyp
     assert model.effects == found.effects and without[0]["local_needed"]
     model, _, _ = validate.eliminate(data, Runner(), found, exact, lambda *a: None)  # no windows: dropped
     assert model.effects == []
+
+
+def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_noise(laser_recordings):
+    """refit.choose_fidelity: the laser arm simulated half as fine (6 segments at 0.2 ms for 11 at 0.1 ms) is within
+    COARSE_MARGIN (0.15) x the noise of its own (RMS) on every channel of two 2 s steps (measured 0.09 x; 0.04-0.07 x
+    on seeds 65-66's 6 s recordings): every later simulation runs so, and one FINER x finer than that is the model's
+    own again, sample for sample; a model with stick-slip there goes back to as fine (keep_fidelity). On 0.4 s steps the
+    transient is most of the recording (0.20 x): as fine as the model. So is Watflex's 1 s elbow step, several times its
+    noise off half as fine (0.5-7.5 x on 6 s recordings)."""
+    from watflex_sim.diagnosis.refit import COARSE_MARGIN, choose_fidelity, keep_fidelity
+    from watflex_sim.diagnosis.runner import Runner
+    from watflex_sim.diagnosis.screening import SCREEN_FINER
+    from watflex_sim.diagnosis.uncertainty import FINER
+
+    said = []
+    steps = [simulate(load_scenario("laser_arm_step", [f"direction={d}", "duration_s=2.0", f"seed={i}"])).recording
+             for i, d in enumerate(("positive", "negative"))]
+    data = prepare(steps, ["a.csv", "b.csv"])
+    with Runner(data, 1) as runner:
+        ours = runner.simulate(Model())
+        sims, error = choose_fidelity(data, runner, ours, lambda kind, message: said.append(message))
+        assert runner.fidelity == SCREEN_FINER and 0.05 < error < COARSE_MARGIN, error
+        assert said and f"{error:.2f} x the noise" in said[0]
+        again = runner.simulate(Model())  # at the fidelity chosen: the coarse simulation it returned
+        assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(again, sims) for c in a.channels)
+        assert not np.array_equal(sims[0].channels["tip_sensor"], ours[0].channels["tip_sensor"])
+        assert runner.refinable(FINER)
+        model_own = runner.simulate(Model(), finer=FINER)
+        assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(model_own, ours) for c in a.channels)
+
+        # refit.keep_fidelity: a smooth finding keeps the coarse model; stick-slip at the hub (the laser demo's gear
+        # stiction) takes it beyond the margin, and the diagnosis goes back to the model's own for good
+        payload = Model([{"effect": "payload", "where": "tip", "mass": 0.1}])
+        assert keep_fidelity(data, runner, payload, runner.simulate(payload), lambda kind, message: None)
+        assert runner.fidelity == SCREEN_FINER
+        stiction = Model([{"effect": "coulomb_friction", "where": "hub", "torque_positive": 2.778, "torque_negative": 0.926}])
+        coarse = runner.simulate(stiction)
+        fine = keep_fidelity(data, runner, stiction, coarse, lambda kind, message: said.append(message))
+        assert runner.fidelity == 1.0 and "from now on" in said[-1]
+        assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(fine, runner.simulate(stiction)) for c in a.channels)
+
+    step = simulate(load_scenario("watflex_elbow_step", ["duration_s=1.0"])).recording
+    for recordings in (laser_recordings, [step]):
+        data = prepare(recordings, [f"{i}.csv" for i in range(len(recordings))])
+        with Runner(data, 1) as runner:
+            ours = runner.simulate(Model())
+            sims, error = choose_fidelity(data, runner, ours, lambda kind, message: None)
+            assert runner.fidelity == 1.0 and sims is ours and error > COARSE_MARGIN, error

@@ -175,6 +175,10 @@ def summary(report: dict) -> str:
                  f"{ho['before']['noise_ratio']:.2f} -> {ho['after']['noise_ratio']:.2f} x the noise ({ho['how']})")
     lines.append(f"all data: NRMSE {report['fit_before']['nrmse']:.4f} -> {report['fit_after']['nrmse']:.4f}, "
                  f"correlation {report['fit_before']['correlation']:.4f} -> {report['fit_after']['correlation']:.4f}")
+    noise = report.get("noise", {})
+    if noise.get("fidelity", 1.0) != 1.0:
+        lines.append(f"simulated {noise['fidelity']:g} x as fine as the rig's model (segments, step): within "
+                     f"{noise['coarse_error']:.2f} x the noise of its own on every channel")
     if report.get("timing"):
         lines.append("time: " + ", ".join(f"{k} {v['seconds']:.0f} s ({v['jobs']} jobs)" for k, v in report["timing"].items()))
     return "\n".join(lines)

@@ -26,7 +26,7 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, offset_alternative, polish, single_from_pair
-from .refit import calibrate_noise, final_refit, refit_nominal
+from .refit import calibrate_noise, final_refit, keep_fidelity, refit_nominal
 from .runner import Runner, evaluator
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -98,6 +98,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         return out | {"local_gain": local_gain(data, local, sims, result["sims"])} if local and not current.effects else out
 
     while len(current.effects) < max_effects:
+        sims = keep_fidelity(data, runner, current, sims, say)  # the findings so far may not stand a coarser model
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         pinned = beyond_tolerance(data, current)
         beyond = []
@@ -189,6 +190,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         current, sims = best["model"], best["sims"]
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
+    sims = keep_fidelity(data, runner, current, sims, say)
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
@@ -250,7 +252,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "parameters_not_refit": sorted(data.idle),  # the recordings do not depend on them
         "noise_nrmse": noise_nrmse(data),
         "noise": {"margin": NOISE_MARGIN, "training_ratio": train_f["noise_ratio"], "validation_ratio": held_f["noise_ratio"],
-                  "per_channel": _noise_table(data)},
+                  "per_channel": _noise_table(data), "fidelity": runner.fidelity, "coarse_error": refit.coarse_error},
         "steps": steps,
         "screening": screened_report,
         "candidates": fitted_report,

@@ -1,7 +1,9 @@
 """Re-simulation and refit: the nominal model on the recordings, the rig's parameters refit within their
 tolerances, and what noise and our own discretisation leave.
 
-Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), refits the rig's
+Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), sets the fidelity every
+later simulation runs at (`choose_fidelity`: half as fine where that is as good against the noise; `keep_fidelity`
+goes back to as fine once a model with effects is not), refits the rig's
 parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
 is near the noise but short of it, until training and validation are within it) and keeps the refit only
 if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
@@ -13,17 +15,20 @@ its simulations and its counterpart fitted on the training blocks.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, unit_change
+from .data import (Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, rms_residual,
+                   unit_change)
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
 from .refine import POLISH_ITERATIONS
 from .runner import Runner, evaluator, in_units
+from .screening import SCREEN_FINER
 from .uncertainty import FINER, NOISE_SEED
 from .validate import NOISE_MARGIN, within, within_noise
 
@@ -36,6 +41,10 @@ COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise get
 # off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
 # refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
 CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
+COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
+# nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
+# most 2 % to a channel's noise variance, and the 2 x finer comparison (calibrate_noise) then counts it. Measured:
+# the laser arm 0.04-0.07 x (6 segments at 0.2 ms for 11 at 0.1 ms, half the cost), Watflex 0.5-7.5 x (seeds 65-66)
 
 
 
@@ -56,6 +65,7 @@ class Refit:
     sims: list[Recording]
     free: list[Slot]
     rig_columns: np.ndarray
+    coarse_error: float | None = None  # x the noise: the nominal model half as fine against its own (choose_fidelity)
 
 
 def refit_nominal(data: Data, runner: Runner, say) -> Refit:
@@ -69,6 +79,7 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     sims_nominal = runner.simulate(nominal)
     if sims_nominal is None:
         raise ConfigError("the nominal model diverges on these recordings")
+    sims_nominal, coarse_error = choose_fidelity(data, runner, sims_nominal, say)
     free = rig_slots(data)
     r_nominal = residual_vector(data, sims_nominal, unit="noise")
     say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
@@ -97,7 +108,60 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
-    return Refit(sims_nominal, current, sims, free, rig_columns)
+    return Refit(sims_nominal, current, sims, free, rig_columns, coarse_error)
+
+
+def choose_fidelity(data: Data, runner: Runner, sims: list[Recording], say) -> tuple[list[Recording], float | None]:
+    """Simulate the nominal model SCREEN_FINER x as fine as the rig's (`sims`: as fine) and, where it is within
+    COARSE_MARGIN x the noise of `sims` (RMS) on every channel of every recording, set `runner.fidelity` to that:
+    every later simulation of the diagnosis then costs about half (the laser arm). Returns the nominal model's
+    simulations at the fidelity chosen and the coarse one's largest difference in noise units (None: no coarser
+    discretisation, or it diverged)."""
+    if not runner.refinable(SCREEN_FINER):
+        return sims, None
+    coarse = runner.simulate(Model(), finer=SCREEN_FINER)
+    if coarse is None:
+        return sims, None
+    worst = _largest_difference(data, sims, coarse)
+    if worst > COARSE_MARGIN:
+        return sims, worst
+    runner.fidelity = SCREEN_FINER
+    say("nominal", f"the model simulated {SCREEN_FINER:g} x as fine is within {worst:.2f} x the noise of its own on every "
+        f"channel (at most {COARSE_MARGIN:g} x): the diagnosis simulates at that")
+    return coarse, worst
+
+
+def keep_fidelity(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[Recording]:
+    """Where the runner simulates coarser than the rig's model (choose_fidelity) and `model` has effects: simulate it as
+    fine as the rig's model too, and if its coarse `sims` are beyond COARSE_MARGIN x the noise of that on some channel
+    (a dead band or stick-slip can make the coarse model far from its own where the nominal one was not: the laser
+    demo's backlash fitted coarse ends at 2.2 x the noise, as fine at 0.84 x), simulate as fine as the rig's model from
+    now on. Returns `model`'s simulations at the fidelity kept."""
+    if runner.fidelity == 1.0 or not model.effects:
+        return sims
+    effects = ", ".join(e["effect"] for e in model.effects)
+    say("fidelity", f"checking the model with {effects}, simulated {runner.fidelity:g} x as fine, against its own")
+    fine = runner.simulate(model, finer=1.0 / runner.fidelity)
+    if fine is None:
+        return sims
+    worst = _largest_difference(data, fine, sims)
+    if worst <= COARSE_MARGIN:
+        return sims
+    runner.fidelity = 1.0
+    say("fidelity", f"with {effects} the model simulated {SCREEN_FINER:g} x as fine is {worst:.2f} x the noise from its own "
+        f"(more than {COARSE_MARGIN:g} x): simulating as fine as the rig's model from now on")
+    return fine
+
+
+def _largest_difference(data: Data, ours: list[Recording], other: list[Recording]) -> float:
+    """The largest RMS difference of two simulations of the recordings over every channel, in units of its noise."""
+    worst = 0.0
+    for i, channels in enumerate(data.channels):
+        everywhere = np.ones(len(ours[i].time), dtype=bool)
+        for c in channels:
+            rms = rms_residual(ours[i], other[i], c, everywhere) or 0.0
+            worst = max(worst, rms / data.noise[i][c] if data.noise[i][c] > 0 else (math.inf if rms else 0.0))
+    return worst
 
 
 def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:

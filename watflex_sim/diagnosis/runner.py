@@ -7,7 +7,9 @@ for a batch to pay, one by one: lockstep._pays); with
 worker processes they are split into one contiguous share per worker, each stepped on one thread
 (the batch's Python control half is single-threaded, so processes still pay on 2 cores). Several fits
 running at once (the candidate fits, each in a thread of the main process) put their calls together through
-`Gathered`. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
+`Gathered`. Every simulation runs `Runner.fidelity` x as fine as the rig's model (resim.finer_discretisation's
+factor; 1 unless refit.choose_fidelity found a coarser one as good against the noise), and a call's `finer` is
+relative to that. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
 when the diagnosis is interrupted or fails (interrupts.stop_pool).
 """
 from __future__ import annotations
@@ -108,6 +110,7 @@ class Runner:
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
+        self.fidelity = 1.0  # every simulation this many times as fine as the rig's model (refit.choose_fidelity)
         self.workers = workers if workers > 1 else 1
         self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C
                      if workers > 1 else None)
@@ -127,10 +130,11 @@ class Runner:
         return [f.result() for f in futures]
 
     def refinable(self, factor: float) -> bool:
-        """Whether simulating `factor` x finer (below 1: coarser) changes the model of some recording: its
-        segments or its step (resim.finer_discretisation)."""
-        return any(finer_discretisation(self.data.rig, scenario_from_recording(r, self.data.rig), factor)
-                   for r in self.data.recordings)
+        """Whether simulating `factor` x finer (below 1: coarser) than the runner's fidelity changes the model of
+        some recording: its segments or its step (resim.finer_discretisation)."""
+        scenarios = [scenario_from_recording(r, self.data.rig) for r in self.data.recordings]
+        return any(finer_discretisation(self.data.rig, s, factor * self.fidelity)
+                   != finer_discretisation(self.data.rig, s, self.fidelity) for s in scenarios)
 
     def simulate(self, model: Model, noise_seed: int | None = None, finer: float = 1) -> list[Recording] | None:
         """Every recording re-simulated with `model` (in lockstep; with `noise_seed` the rig's
@@ -139,7 +143,7 @@ class Runner:
         return self.simulate_seeds(model, [noise_seed], finer)[0]
 
     def simulate_seeds(self, model: Model, seeds: list[int | None], finer: float = 1) -> list[list[Recording] | None]:
-        """`simulate` once per noise seed (None: noise off), all in one lockstep call."""
+        """`simulate` once per noise seed (None: noise off), all in one lockstep call; `finer` relative to the fidelity."""
         return self._simulate_each([(model, seed) for seed in seeds], finer)
 
     def simulate_models(self, models: list[Model]) -> list[list[Recording] | None]:
@@ -148,7 +152,8 @@ class Runner:
 
     def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: float = 1) -> list[list[Recording] | None]:
         n = len(self.data.recordings)
-        sims = self.lockstep(_simulate_some, [(model, i, seed, finer) for model, seed in runs for i in range(n)])
+        factor = finer * self.fidelity
+        sims = self.lockstep(_simulate_some, [(model, i, seed, factor) for model, seed in runs for i in range(n)])
         return [None if any(s is None for s in sims[k * n:(k + 1) * n]) else sims[k * n:(k + 1) * n]
                 for k in range(len(runs))]
 
@@ -182,13 +187,15 @@ def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread", 
     """models -> residual vectors on a part ('train': what fits minimise; 'all': the final refit) in `unit`
     ('spread', or 'noise': the refit of the rig's parameters), in the pool (one job per model and
     recording) or in this process. The workers' noise is the data's when the Runner started. `finer`:
-    the models simulated that many times finer (below 1: coarser; resim.finer_discretisation; with a Runner)."""
+    the models simulated that many times finer than the runner's fidelity (below 1: coarser;
+    resim.finer_discretisation; with a Runner)."""
     if runner is None:
         return lambda models: [_residual(m, part, unit) for m in models]
 
     def evaluate(models):
         n = len(runner.data.recordings)
-        pieces = runner.lockstep(_pieces, [(m, i, part, unit, finer) for m in models for i in range(n)])
+        factor = finer * runner.fidelity
+        pieces = runner.lockstep(_pieces, [(m, i, part, unit, factor) for m in models for i in range(n)])
         out = []
         for k in range(len(models)):
             mine = pieces[k * n:(k + 1) * n]

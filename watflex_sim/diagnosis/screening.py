@@ -224,8 +224,8 @@ def sensor_signature(data: Data, sims: list[Recording], cand: Candidate) -> dict
 
 def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate]) -> None:
     """Fill each candidate's signature columns: one simulation per probe, in parallel, SCREEN_FINER x as fine as
-    the model (`base` too, so each column is a difference at one discretisation); a probe that diverges there is
-    simulated as fine as the model, against `r0`."""
+    the model (`base` too, so each column is a difference at one discretisation; at the runner's fidelity where that
+    is as coarse already); a probe that diverges there is simulated at the runner's fidelity, against `r0`."""
     looped = fed_back(data)
     jobs, owners = [], []
     for cand in cands:
@@ -238,7 +238,8 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
     if not jobs:
         return
     full = evaluator(runner)
-    coarse = evaluator(runner, finer=SCREEN_FINER)([base] + jobs) if runner.refinable(SCREEN_FINER) else []
+    factor = min(1.0, SCREEN_FINER / runner.fidelity)  # relative to the runner's: no coarser than SCREEN_FINER
+    coarse = evaluator(runner, finer=factor)([base] + jobs) if runner.refinable(factor) else []
     if coarse and coarse[0] is not None:
         runs, against = coarse[1:], [coarse[0]] * len(jobs)
     else:
