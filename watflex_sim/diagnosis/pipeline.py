@@ -98,7 +98,6 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         return out | {"local_gain": local_gain(data, local, sims, result["sims"])} if local and not current.effects else out
 
     while len(current.effects) < max_effects:
-        sims = keep_fidelity(data, runner, current, sims, say)  # the findings so far may not stand a coarser model
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         pinned = beyond_tolerance(data, current)
         beyond = []
@@ -188,9 +187,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
         current, sims = best["model"], best["sims"]
+        sims = keep_fidelity(data, runner, current, sims, say)  # a finding may not stand the coarser model
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
-    sims = keep_fidelity(data, runner, current, sims, say)
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:

@@ -15,14 +15,13 @@ its simulations and its counterpart fitted on the training blocks.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from .data import (Data, Model, add_closed_loop_noise, add_discretisation_error, fit_scores, residual_vector, rms_residual,
+from .data import (Data, Model, add_closed_loop_noise, add_discretisation_error, channel_ratios, fit_scores, residual_vector,
                    unit_change)
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
@@ -132,7 +131,8 @@ def choose_fidelity(data: Data, runner: Runner, sims: list[Recording], say) -> t
 
 
 def keep_fidelity(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[Recording]:
-    """Where the runner simulates coarser than the rig's model (choose_fidelity) and `model` has effects: simulate it as
+    """Where the runner simulates coarser than the rig's model (choose_fidelity) and `model` has effects (called as each
+    finding is taken): simulate it as
     fine as the rig's model too, and if its coarse `sims` are beyond COARSE_MARGIN x the noise of that on some channel
     (a dead band or stick-slip can make the coarse model far from its own where the nominal one was not: the laser
     demo's backlash fitted coarse ends at 2.2 x the noise, as fine at 0.84 x), simulate as fine as the rig's model from
@@ -154,14 +154,9 @@ def keep_fidelity(data: Data, runner: Runner, model: Model, sims: list[Recording
 
 
 def _largest_difference(data: Data, ours: list[Recording], other: list[Recording]) -> float:
-    """The largest RMS difference of two simulations of the recordings over every channel, in units of its noise."""
-    worst = 0.0
-    for i, channels in enumerate(data.channels):
-        everywhere = np.ones(len(ours[i].time), dtype=bool)
-        for c in channels:
-            rms = rms_residual(ours[i], other[i], c, everywhere) or 0.0
-            worst = max(worst, rms / data.noise[i][c] if data.noise[i][c] > 0 else (math.inf if rms else 0.0))
-    return worst
+    """The largest RMS difference of two simulations of the recordings over every channel, in units of its noise
+    (data.channel_ratios with `ours` standing for the measurements)."""
+    return max((r["ratio"] for r in channel_ratios(replace(data, recordings=ours), other)), default=0.0)
 
 
 def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:
