@@ -771,7 +771,8 @@ def test_signatures_are_differences_at_one_discretisation(monkeypatch):
     """screening.signatures simulates the probes and the model itself SCREEN_FINER x as fine, in one call, and takes
     each column against that coarse model: an error of the coarse discretisation common to both cancels. A probe
     that diverges there is simulated as fine as the model, against the given residual r0. Here the residual is
-    x col + e with e = 5 at the coarse discretisation, 0 at the model's: both columns come out as col exactly."""
+    x col + e with e = 5 at the coarse discretisation, 0 at the model's: both columns come out as col exactly, in the
+    units `per` turns spread units into (the screening compares in noise units, as the fits and the verdict)."""
     from watflex_sim.diagnosis import screening
     from watflex_sim.diagnosis.screening import SCREEN_FINER, Candidate
 
@@ -799,10 +800,11 @@ def test_signatures_are_differences_at_one_discretisation(monkeypatch):
         def refinable(self, factor):
             return factor == SCREEN_FINER
 
-    screening.signatures(None, Runner(), Model(), [], np.zeros(3), cands)
+    per = np.array([1.0, 2.0, 4.0])  # noise / spread of each element
+    screening.signatures(None, Runner(), Model(), [], np.zeros(3), cands, per)
     assert calls == [(SCREEN_FINER, 3), (1, 1)]  # the base and both probes coarse; the diverged probe again, as fine
     for cand, key in zip(cands, ("damping", "level")):
-        np.testing.assert_allclose(cand.signature[1.0][key], col, rtol=1e-12)
+        np.testing.assert_allclose(cand.signature[1.0][key], col / per, rtol=1e-12)
 
 
 def test_the_watflex_model_is_coarser_than_its_noise_and_the_laser_arm_is_not():

@@ -27,7 +27,7 @@ from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, offset_alternative, polish, single_from_pair
 from .refit import calibrate_noise, final_refit, keep_fidelity, refit_nominal
-from .runner import Runner, evaluator
+from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
@@ -119,15 +119,17 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                     f"{w['ratio']:.1f} x above what noise and discretisation leave there ({w['channel']} in {w['recording']}, "
                     f"{w['t_start']:.2f}-{w['t_end']:.2f} s, {w['regime']}): a round for them")
         round_ += 1
-        r0 = residual_vector(data, sims)
+        # the screening compares in noise units, as the fits and the verdict: in spread units a noisy channel's
+        # misfit outweighs a precise one's and the shortlist can miss what the verdict needs
+        r0 = residual_vector(data, sims) / per
         # signatures are taken around the current model: an effect can look different once
         # another is in (a slip shows only where stiction lets the joint move)
         live = beyond or [make_candidate(data, e, w) for e, w in candidates(data, current.effects)]
         say("signatures", f"round {round_}: taking the signatures of {len(live)} candidate effects "
             f"({sum(len(c.probes()) for c in live)} probe simulations)")
-        signatures(data, runner, current, sims, r0, live)
-        evaluate = evaluator(runner)
-        columns, slots, at = with_findings(evaluate, data, current, r0, rig_columns, free,
+        signatures(data, runner, current, sims, r0, live, per)
+        evaluate = in_units(evaluator(runner), per)
+        columns, slots, at = with_findings(evaluate, data, current, r0, rig_columns / per[:, None], free,
                                            np.array([value_of(current, s) for s in free]))
         screen(live, columns, slots, at, r0)
         live.sort(key=lambda c: (-c.gain, c.effect, c.where))
@@ -138,7 +140,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         hidden = None
         if round_ == 1 and not beyond and current.parameters:  # what the refit may have taken up
             hidden = concealed(live, columns, slots, np.array([value_of(nominal, s) for s in free]),
-                               residual_vector(data, sims_nominal), top)
+                               residual_vector(data, sims_nominal) / per, top)
             top += [hidden] if hidden else []
         if not top:
             break

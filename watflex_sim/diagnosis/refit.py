@@ -7,7 +7,7 @@ goes back to as fine once a model with effects is not), refits the rig's
 parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
 is near the noise but short of it, until training and validation are within it) and keeps the refit only
 if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
-their Jacobian columns (spread units, for the screening), and marks idle parameters in `data.idle`.
+their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in `data.idle`.
 `calibrate_noise` adds to `data` what the rig's noise leaves in closed loop and what a finer
 discretisation changes. `final_refit` refits a chosen model's parameters on all the data (again from a point
 further along a shape or quantised parameter where a profile there costs less: level.level_start) and returns it with
@@ -57,7 +57,8 @@ def compass_worth(train: dict) -> bool:
 class Refit:
     """The nominal model's simulations and the refit's: `model` (the rig's parameters refit, or the nominal
     model where the refit did not earn its place) with its `sims`, the refit's live `free` slots and their
-    Jacobian columns at the nominal model (`rig_columns`, spread units: what the screening compares)."""
+    Jacobian columns at the nominal model (`rig_columns`, spread units; the screening and the fits divide them
+    by `data.unit_change`)."""
 
     sims_nominal: list[Recording]
     model: Model
@@ -104,7 +105,8 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
                           enough=within_both)
         # the last move judged is where the search ended unless a later move followed: its simulations serve
         sims = checked["sims"] if checked.get("model") == current else runner.simulate(current)
-    rig_columns = rig_columns * unit_change(data)[:, None]  # the screening works in spread units (the effect fits turn them back)
+    # in spread units: the screening and the fits turn them back to noise units with the noise calibrated next
+    rig_columns = rig_columns * unit_change(data)[:, None]
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
     return Refit(sims_nominal, current, sims, free, rig_columns, coarse_error)

@@ -20,7 +20,7 @@ from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, STRIDE, scale_of
 from .fitting import Slot, effect_slots_of, jacobian, refit_cost, value_of
-from .runner import evaluator
+from .runner import evaluator, in_units
 
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
 # the other side of neutral (0.9 -> 2.0): a stiffer link than the datasheet's is as likely as a softer one
@@ -222,24 +222,26 @@ def sensor_signature(data: Data, sims: list[Recording], cand: Candidate) -> dict
     return {"ratio": values}
 
 
-def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate]) -> None:
-    """Fill each candidate's signature columns: one simulation per probe, in parallel, SCREEN_FINER x as fine as
-    the model (`base` too, so each column is a difference at one discretisation; at the runner's fidelity where that
-    is as coarse already); a probe that diverges there is simulated at the runner's fidelity, against `r0`."""
+def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate],
+               per: np.ndarray) -> None:
+    """Fill each candidate's signature columns in the units `per` turns spread units into (`data.unit_change`: noise
+    units, as `r0`): one simulation per probe, in parallel, SCREEN_FINER x as fine as the model (`base` too, so each
+    column is a difference at one discretisation; at the runner's fidelity where that is as coarse already); a probe
+    that diverges there is simulated at the runner's fidelity, against `r0`."""
     looped = fed_back(data)
     jobs, owners = [], []
     for cand in cands:
         if cand.effect in ("sensor_gain", "sensor_offset") and cand.where not in looped:
-            cand.signature = {1.0: sensor_signature(data, sims, cand)}
+            cand.signature = {1.0: {n: v / per for n, v in sensor_signature(data, sims, cand).items()}}
             continue
         for key, values in cand.probes().items():
             jobs.append(cand.model(base, values))
             owners.append((cand, key))
     if not jobs:
         return
-    full = evaluator(runner)
+    full = in_units(evaluator(runner), per)
     factor = min(1.0, SCREEN_FINER / runner.fidelity)  # relative to the runner's: no coarser than SCREEN_FINER
-    coarse = evaluator(runner, finer=factor)([base] + jobs) if runner.refinable(factor) else []
+    coarse = in_units(evaluator(runner, finer=factor), per)([base] + jobs) if runner.refinable(factor) else []
     if coarse and coarse[0] is not None:
         runs, against = coarse[1:], [coarse[0]] * len(jobs)
     else:
@@ -299,7 +301,7 @@ def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: n
 def with_findings(evaluate, data: Data, model: Model, r0: np.ndarray, rig_columns: np.ndarray, free: list[Slot],
                   at: np.ndarray) -> tuple[np.ndarray, list[Slot], np.ndarray]:
     """The rig's columns, slots and values (`screen`'s arguments) with those of the effects found so far: each
-    found parameter's Jacobian column at `model` (one simulation each; spread units per unit of its value, a
+    found parameter's Jacobian column at `model` (one simulation each; `evaluate`'s units per unit of its value, a
     log-scaled one's divided by its value) on a linear slot within its bounds, so the screening refits the findings
     to first order beside the rig's parameters, as the candidate fits refit them. Held at their values, a finding
     that took up part of a second effect makes that effect screen worse than none (seed 55: a current limit behind
