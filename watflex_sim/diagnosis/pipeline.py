@@ -120,8 +120,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                     f"{w['t_start']:.2f}-{w['t_end']:.2f} s, {w['regime']}): a round for them")
         round_ += 1
         # the screening compares in noise units, as the fits and the verdict: in spread units a noisy channel's
-        # misfit outweighs a precise one's and the shortlist can miss what the verdict needs
-        r0 = residual_vector(data, sims) / per
+        # misfit outweighs a precise one's and the shortlist can miss what the verdict needs. The residual is this
+        # process' (its noise has the closed-loop floor); the simulations' come from the workers, turned by `per`
+        r0 = residual_vector(data, sims, unit="noise")
         # signatures are taken around the current model: an effect can look different once
         # another is in (a slip shows only where stiction lets the joint move)
         live = beyond or [make_candidate(data, e, w) for e, w in candidates(data, current.effects)]
@@ -140,7 +141,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         hidden = None
         if round_ == 1 and not beyond and current.parameters:  # what the refit may have taken up
             hidden = concealed(live, columns, slots, np.array([value_of(nominal, s) for s in free]),
-                               residual_vector(data, sims_nominal) / per, top)
+                               residual_vector(data, sims_nominal, unit="noise"), top)
             top += [hidden] if hidden else []
         if not top:
             break
