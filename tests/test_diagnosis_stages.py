@@ -1473,3 +1473,50 @@ def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_
             ours = runner.simulate(Model())
             sims, error = choose_fidelity(data, runner, ours, lambda kind, message: None)
             assert runner.fidelity == 1.0 and sims is ours and error > COARSE_MARGIN, error
+
+
+def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are_in(monkeypatch):
+    """swap_earlier(): seed 65, laser_arm-d6ea25d4 (hub Coulomb friction beside a voltage gain x1.132): with the
+    gain missing, a Stribeck friction fitted validation best in round 1 (1.83 x the noise, Coulomb 2.19 x) and was
+    kept beside the gain. Each runner-up within SWAP_WITHIN (1.5 x) of the winner is refit in its place beside the
+    later findings, and taken when validate.gains scores it better against the model without the winner (training
+    and validation falls, MIN_GAIN = 0.02 per parameter). Noise ratios here are set per set of effects: without
+    the friction 5.5 x; Stribeck (3 parameters) 0.77 x: score 2 (5.5 - 0.77) / 5.5 - 0.06 = 1.660; Coulomb
+    (2 parameters) 0.75 x: 1.687, taken; at 0.95 x: 1.615, not taken; a position-dependent friction at 0.90 x: 1.593."""
+    from watflex_sim.diagnosis import refine
+
+    ratio = {("actuator_gain",): 5.5, ("actuator_gain", "stribeck_friction"): 0.77,
+             ("actuator_gain", "coulomb_friction"): 0.75, ("actuator_gain", "position_dependent_friction"): 0.90}
+    n_params = {"stribeck_friction": 3, "coulomb_friction": 2, "position_dependent_friction": 4, "actuator_gain": 1}
+
+    class Runner:
+        def simulate(self, model):
+            return ratio[tuple(sorted(e["effect"] for e in model.effects))]  # stands for the simulations
+
+    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
+    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
+    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: [])
+    monkeypatch.setattr(refine, "rig_slots", lambda data: [])
+    monkeypatch.setattr(refine, "_n_params", lambda data, effect: n_params[effect["effect"]])
+    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
+    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
+                                                                      "held_out": {"noise_ratio": sims}})
+
+    def fitted(effect, held, score):
+        return {"effect": effect, "where": "hub", "model": Model([{"effect": effect, "where": "hub"}]),
+                "held_out": {"noise_ratio": held}, "score": score}
+
+    gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 1.118}
+    current = refine.scored(None, {"model": Model([{"effect": "stribeck_friction", "where": "hub"}, gain])}, 0.77)
+    round_1 = (fitted("stribeck_friction", 1.83, 1.187), [fitted("coulomb_friction", 2.19, 1.0),
+                                                          fitted("position_dependent_friction", 2.26, 1.18),
+                                                          fitted("viscous_friction", 3.0, 0.9)])  # beyond 1.5 x: not tried
+    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    assert [e["effect"] for e in out["model"].effects] == ["actuator_gain", "coulomb_friction"]
+    assert out["score"] == pytest.approx(2 * (5.5 - 0.75) / 5.5 - 0.04)
+    assert [(a["effect"], b["effect"]) for a, b in tried] == [("position_dependent_friction", "stribeck_friction"),
+                                                              ("stribeck_friction", "coulomb_friction")]
+    assert tried[1][0]["model"].effects[-1]["effect"] == "stribeck_friction"  # the one replaced, last: alternative_entry
+    ratio[("actuator_gain", "coulomb_friction")] = 0.95
+    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    assert out is current and [a["effect"] for a, _ in tried] == ["position_dependent_friction", "coulomb_friction"]

@@ -5,8 +5,9 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 (kept only if validation does not get worse); locate; rounds of screening, candidate fits (in the first round also
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
-validation by MIN_HELD_GAIN; backward elimination (a finding whose removal from the final model does
-not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
+validation by MIN_HELD_GAIN; each earlier round's runners-up refit in its winner's place beside the later findings
+(refine.swap_earlier: a round chose with the later effects missing); backward elimination (a finding whose removal
+from the final model does not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
@@ -25,7 +26,7 @@ from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
-from .refine import alternative_entry, offset_alternative, polish, single_from_pair
+from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
 from .refit import calibrate_noise, final_refit, keep_fidelity, refit_nominal
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
@@ -86,7 +87,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
     mismatch = locate(data, sims)
-    rejected, screened_report, fitted_report, alternatives = [], [], [], []
+    rejected, screened_report, fitted_report, alternatives, rounds = [], [], [], [], []
     round_ = 0
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
     local, local_tried = [], False  # windows far above their local null (locate.local_excess) where the refit model is
@@ -187,12 +188,26 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
         alternatives += [alternative_entry(data, r, best, n) for r in fitted if places(r) != places(best)
                          and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
+        rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
         current, sims = best["model"], best["sims"]
+        coarse = runner.fidelity
         sims = keep_fidelity(data, runner, current, sims, say)  # a finding may not stand the coarser model
+        if runner.fidelity != coarse:  # fitted coarse, carried on as fine (else a later round refits it and takes the gain)
+            say("polish", f"round {round_}: carrying {best['effect']} at {best['where']} on as fine as the rig's model")
+            best = carry_on(data, runner, scored(data, best, sims))
+            current, sims = best["model"], best["sims"]
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
+    if len(rounds) > 1:  # an earlier round's choice, with the later findings in (refine.swap_earlier)
+        say("swap", "refitting each earlier finding's runners-up in its place beside the later findings")
+        now, tried = swap_earlier(data, runner, scored(data, {"model": current}, sims), rounds[:-1], PAIR_MARGIN)
+        if now["model"] is not current:
+            current, sims = now["model"], now["sims"]
+            steps.append({"model": f"{now['effect']} at {now['where']} in an earlier finding's place", **_scores(data, sims, current)})
+        alternatives += [alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
+                         if loser["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * winner["held_out"]["noise_ratio"]]
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:

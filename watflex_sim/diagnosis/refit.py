@@ -137,7 +137,8 @@ def keep_fidelity(data: Data, runner: Runner, model: Model, sims: list[Recording
     finding is taken): simulate it as fine as the rig's model too, and if its coarse `sims` are beyond COARSE_MARGIN x
     the noise of that on some channel (a dead band or stick-slip can make the coarse model far from its own where the
     nominal one was not: the laser demo's backlash fitted coarse ends at 2.2 x the noise, as fine at 0.84 x), simulate
-    as fine as the rig's model from now on. Returns `model`'s simulations at the fidelity kept."""
+    as fine as the rig's model from now on (the pipeline then carries the finding's fit on there: refine.carry_on).
+    Returns `model`'s simulations at the fidelity kept."""
     if runner.fidelity == 1.0 or not model.effects:
         return sims
     effects = ", ".join(e["effect"] for e in model.effects)
