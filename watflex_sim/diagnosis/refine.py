@@ -1,8 +1,9 @@
-"""Refining the chosen candidate: its polish, and the other forms of the same finding.
+"""Refining the chosen candidate: its polish, the other forms of the same finding, and earlier choices tried again.
 
 Contract: `polish` carries a candidate's fit on (from the refit rig and, given, from the datasheet's values) and
 keeps the better; `offset_alternative` / `single_from_pair` fit an asymmetric Coulomb friction's other form (a
-symmetric friction plus an actuator offset) and back; `alternative_entry` describes a candidate within noise of the
+symmetric friction plus an actuator offset) and back; `swap_earlier` puts an earlier round's runners-up in its
+winner's place once the later findings are in; `alternative_entry` describes a candidate within noise of the
 chosen one for the report. Each returns a result scored like a candidate (effect_fit.scored).
 """
 from __future__ import annotations
