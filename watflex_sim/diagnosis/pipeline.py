@@ -206,8 +206,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         if now["model"] is not current:
             current, sims = now["model"], now["sims"]
             steps.append({"model": f"{now['effect']} at {now['where']} in an earlier finding's place", **_scores(data, sims, current)})
-        alternatives += [alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
-                         if loser["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * winner["held_out"]["noise_ratio"]]
+        judged = {(loser["effect"], loser["where"], winner["effect"]) for loser, winner in tried}  # judged again beside the later findings
+        alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
+            alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
+            if loser["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * winner["held_out"]["noise_ratio"]]
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
