@@ -193,8 +193,8 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
         if len(places) < 2 or (winner["effect"], winner["where"]) not in places:
             continue
         i = places.index((winner["effect"], winner["where"]))
-        without = runner.simulate(Model([e for j, e in enumerate(current["model"].effects) if j != i],
-                                        dict(current["model"].parameters)))
+        rest = [e for j, e in enumerate(current["model"].effects) if j != i]  # the later findings (and any other)
+        without = runner.simulate(Model(rest, dict(current["model"].parameters)))
         if without is None:
             continue
         baseline = (fit_scores(data, without, "train"), fit_scores(data, without, "held_out"))
@@ -204,7 +204,7 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
                   and (r["effect"], r["where"]) not in places
                   and r["held_out"]["noise_ratio"] <= SWAP_WITHIN * winner["held_out"]["noise_ratio"]]
         for other in sorted(others, key=lambda r: -r["score"])[:SWAP_TRIES]:
-            effects = [e for j, e in enumerate(current["model"].effects) if j != i] + [dict(other["model"].effects[-1])]
+            effects = rest + [dict(other["model"].effects[-1])]
             trial = Model(effects, dict(current["model"].parameters))
             free = effect_slots_of(data, trial) + rig_slots(data)
             try:
@@ -219,8 +219,8 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
                                          "n_params": _n_params(data, effects[-1]), "cost": cost, "free": free, "J": J}, sims),
                            *baseline)
             if result["score"] > chosen["score"] + margin:  # the one replaced, its effect last (alternative_entry)
-                kept = current["model"].effects
-                tried.append(({**chosen, "model": Model(effects[:-1] + [kept[i]], dict(chosen["model"].parameters))}, result))
+                replaced = current["model"].effects[i]
+                tried.append(({**chosen, "model": Model(rest + [replaced], dict(chosen["model"].parameters))}, result))
                 current, chosen = result, result
                 break
             tried.append((result, chosen))
