@@ -1000,13 +1000,13 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
 
 
 def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin():
-    """scan_period(): a ripple's residual is far from convex in its period (seed 52: a 0.77 rad Watflex elbow ripple
+    """period_scans(): a ripple's residual is far from convex in its period (seed 52: a 0.77 rad Watflex elbow ripple
     fitted at 1.35 rad from the start at 3 x the motion's range, 5 x the noise left). On a stand-in whose residual is
     the ripple's torque along 0.54 rad of motion (exactly linear in a sin + b cos at a given period), the scan
     from the screening's start (period 1.63 rad, a spring absorbing part of the ripple) must land within the ladder's
     spacing of the true 0.77 rad (neighbouring periods drift at most half a cycle apart over the range; the rung
     nearest 0.77 is 0.761, 1 % off) with amplitude and phase near the truth, and cost a tenth of the start's."""
-    from watflex_sim.diagnosis.scan import period_ladder, scan_period
+    from watflex_sim.diagnosis.scan import period_ladder, period_scans
     from watflex_sim.diagnosis.screening import Candidate
 
     motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
@@ -1026,7 +1026,7 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     start = {"amplitude": -1.77, "period": 1.63, "phase": 0.0, "spring": 4.32}  # seed 52's screening estimate
     cost = lambda r: float(r @ r)  # noqa: E731
     none = np.zeros((x.size, 0))
-    found, found_cost = scan_period(evaluate, cand, Model(), start, cost, none, np.zeros(0), np.zeros(0), np.zeros(0))
+    (found, found_cost), = period_scans(evaluate, cand, Model(), start, [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)))])
     ladder = period_ladder(slots["period"], motion)
     assert min(ladder) == pytest.approx(0.2 * motion) and 4 * motion < max(ladder) <= 8 * motion
     drift = -np.diff(motion / np.array(ladder))  # cycles of phase over the range between neighbouring periods
@@ -1036,6 +1036,105 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     assert abs(found["phase"] - truth["phase"]) < 0.2  # rad
     assert found_cost == pytest.approx(cost(evaluate([cand.model(Model(), found)])[0]))
     assert found_cost < 0.1 * cost(evaluate([cand.model(Model(), start)])[0])
+
+
+def test_a_ripples_period_is_scanned_beside_the_other_effects_the_shortlist_names():
+    """scan.period_scans() with scan.beside(): a ripple's period scanned against a residual that another missing
+    effect dominates lands where a wrong period mimics that effect (seed 68, watflex-db048a3c: an elbow ripple of
+    1.35 N m at 0.82 rad beside a Coulomb friction of 0.86 / 0.99 N m was scanned and fitted at 0.116 rad). Stand-in:
+    the ripple of the test above plus another effect whose residual is 1.0 x a square wave of 0.12 rad along the
+    motion (a friction's sign at each reversal of a staircase). The scan alone takes the wrong period (within 10 % of
+    0.12); the same scan with the other's signature column re-solved beside it, from the same rung simulations, must
+    land within 2 % of the true 0.77 rad with the amplitude within 5 % and the phase within 0.1 rad, and leave a
+    hundredth of the cost; with the other effect absent from the data both ways agree (the period to the digit, the
+    amplitude within 1 %). Both are fitted from (effect_fit.fit_candidate): the fit that leaves less residual is kept."""
+    from watflex_sim.diagnosis.fitting import refit_cost
+    from watflex_sim.diagnosis.scan import beside, period_scans
+    from watflex_sim.diagnosis.screening import Candidate
+
+    motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
+    square = np.sign(np.sin(2 * np.pi * x / 0.12))  # the other effect's residual per N m
+
+    def torque(e):
+        return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
+
+    truth = {"amplitude": 0.85, "period": 0.77, "phase": -2.575, "spring": 0.0}
+    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
+             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
+                     slots, {"amplitude": 0.0, "spring": 0.0}, periodic="period")
+    other = Candidate("coulomb_friction", "elbow", {"torque": 0.5}, {"torque": Slot(("effect", -1, "torque"), 0.0, 5.0)}, {"torque": 0.0})
+    other.signature = {1.0: {"torque": square}}
+    start = {"amplitude": -1.77, "period": 1.63, "phase": 0.0, "spring": 4.32}  # seed 52's screening estimate
+    columns, at, low, high = beside(cand, [cand, other])
+    assert columns.shape == (x.size, 1) and at.tolist() == [0.0] and low.tolist() == [0.0] and high.tolist() == [5.0]
+    assert beside(cand, [cand]) is None
+    none = np.zeros((x.size, 0))
+    ways = [(lambda r: float(r @ r), (none, np.zeros(0), np.zeros(0), np.zeros(0))),
+            (lambda r: refit_cost(columns, r, at, low, high), (columns, at, low, high))]
+
+    def scans(size: float) -> list[tuple[dict, float]]:
+        def evaluate(models):
+            return [torque(m.effects[-1]) - torque(truth) - size * square for m in models]
+        return period_scans(evaluate, cand, Model(), start, ways)
+
+    (alone, _), (found, cost) = scans(1.0)
+    assert abs(alone["period"] / 0.12 - 1) < 0.1
+    assert abs(found["period"] / truth["period"] - 1) < 0.02
+    assert abs(found["amplitude"] / truth["amplitude"] - 1) < 0.05 and abs(found["phase"] - truth["phase"]) < 0.1
+    assert cost < 0.01 * float(square @ square)
+    (alone, _), (found, _) = scans(0.0)
+    assert found["period"] == pytest.approx(alone["period"]) and found["amplitude"] == pytest.approx(alone["amplitude"], rel=0.01)
+
+
+
+def test_a_ripple_is_fitted_again_from_the_period_the_scan_beside_the_others_chose():
+    """fit_candidate(): where the scan beside the shortlist's others (scan.period_scans' second way) lands on another
+    period than the scan beside the rig alone, the candidate is fitted from both and the second fit is returned under
+    'also', for the round to judge (seed 68, watflex-db048a3c: from the second way's 1.05 rad the fit left more |r|^2
+    than the wrong 0.116 rad, 1.50e8 against 0.96e8, yet removed more of the training excess, 0.336 against 0.260, and
+    led to the pair; by |r|^2 alone it was lost). Stand-in: the scans return a wrong period (first) and one 10 % off
+    the truth (second); the first fit stays where it starts, the carry-on reaches the truth from within 20 % of its
+    period. Returned: the wrong period's fit, and under 'also' the truth. Where both ways agree within half a ladder
+    rung: no 'also'. Fails without the second way's fit."""
+    from types import SimpleNamespace
+    from watflex_sim.diagnosis import effect_fit
+    from watflex_sim.diagnosis.screening import Candidate
+
+    x = np.linspace(0.0, 0.544, 600)  # rad
+    truth = {"amplitude": 0.85, "period": 0.77, "phase": -2.575, "spring": 0.0}
+
+    def torque(e):
+        return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
+
+    def evaluate(models):
+        return [torque(m.effects[-1]) - torque(truth) for m in models]
+
+    wrong = {"amplitude": 0.1, "period": 0.12, "phase": 0.0, "spring": 0.0}
+    near = dict(truth, period=0.85, amplitude=-0.85)
+    stays = lambda data, evaluate, base, cand, rig_columns, iters, values: {"effect": cand.effect, "where": cand.where,  # noqa: E731
+                                                                             "model": cand.model(base, values), "cost": 0.0}
+
+    def carried(evaluate, cand, first, iters):
+        found = first["model"].effects[-1]
+        moved = dict(truth) if abs(np.log(found["period"] / truth["period"])) < np.log(1.2) else found
+        return {**first, "model": Model(first["model"].effects[:-1] + [dict(found, **moved)])}
+
+    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.1, 100.0, log=True),
+             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.5, "period": 1.6, "phase": 0.0, "spring": 0.0},
+                     slots, {"amplitude": 0.0, "spring": 0.0}, estimate=dict(wrong), periodic="period")
+    data = SimpleNamespace(rig=SimpleNamespace(parameters={}), idle=set())
+    for second, expected in ((near, truth), (dict(wrong, amplitude=0.2), None)):
+        with patch.object(effect_fit, "period_scans", lambda evaluate, cand, base, values, ways: [(wrong, 1.0), (second, 2.0)]), \
+                patch.object(effect_fit, "fit_from", stays), patch.object(effect_fit, "carry_on", carried):
+            out = effect_fit.fit_candidate(data, evaluate, Model(), cand, np.zeros((x.size, 0)), 6)
+        assert out["model"].effects[-1]["period"] == wrong["period"]
+        if expected is None:
+            assert "also" not in out
+        else:
+            assert [a["model"].effects[-1]["period"] for a in out["also"]] == [truth["period"]]
+            assert out["also"][0]["model"].effects[-1]["amplitude"] == truth["amplitude"]
 
 
 DWELL_TRUTH = {"gain": 0.53, "time_constant": 0.67}  # a dwell-time stiction like seed 63's watflex-bddd453b (0.527, 0.666 s)

@@ -3,8 +3,9 @@
 Contract: `fit_candidate` fits one screened candidate (screening.Candidate) on top of the current model
 together with the rig's parameters and the effects found before, in noise units: a quantised parameter's
 step by search (`step_search`, again after the rest is fitted: `restep`), a ripple's period by a scan
-(scan.scan_period), a shape parameter's starts by a scan too (scan.scan_shape: the fit runs from its contenders and
-from the screening's values), the rest by Levenberg-Marquardt; it returns the fitted model and its Jacobian.
+(scan.period_scans; also beside the round's other candidates, a second fit where that lands elsewhere: 'also'), a
+shape parameter's starts by a scan too (scan.scan_shape: the fit runs from its contenders and from the screening's
+values), the rest by Levenberg-Marquardt; it returns the fitted model and its Jacobian.
 `fit_candidates` fits several at once, their simulations gathered (runner.Gathered), and adds each fitted
 model's simulations (scored by the caller, `scored`).
 """
@@ -20,7 +21,7 @@ from .data import Data, Model, fit_scores
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost,
                       rig_slots, value_of)
 from .runner import Gathered, Runner, evaluator, in_units
-from .scan import same_rung, scan_period, scan_shape
+from .scan import PERIOD_LADDER, beside, period_scans, same_rung, scan_shape
 from .screening import Candidate
 from .tolerance import at_bounds
 
@@ -100,14 +101,14 @@ def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidat
     ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.Gathered:
     the k-th call of every fit in one lockstep call): one fit per worker left a worker idle once its fit ended or
     when the fits outnumbered the workers (3 on 2). The same simulations as one fit per worker, so the same results
-    to the digit."""
+    to the digit. A candidate's second fit ('also': a ripple from the scan beside the others) follows its first."""
     gathered = Gathered(in_units(evaluator(runner), per), len(cands))
     rig_columns = rig_columns / per[:, None]  # in noise units, as the fits' residuals
     results: list = [None] * len(cands)
 
     def work(k: int) -> None:
         try:
-            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns, iters)
+            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns, iters, cands)
         except BaseException as exc:  # noqa: BLE001 - raised again below, in the caller's thread
             results[k] = exc
         finally:
@@ -121,6 +122,7 @@ def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidat
     failed = next((r for r in results if isinstance(r, BaseException)), None)
     if failed is not None:
         raise failed
+    results = [fit for r in results for fit in [r, *r.pop("also", [])]]  # a ripple's fit from the scan beside the others
     fitted = [r for r in results if "model" in r]
     for result, sims in zip(fitted, runner.simulate_models([r["model"] for r in fitted])):
         if sims is None:
@@ -131,7 +133,8 @@ def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidat
     return results
 
 
-def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_columns: np.ndarray, iters: int) -> dict:
+def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_columns: np.ndarray, iters: int,
+                  others: list[Candidate] = ()) -> dict:
     """Fit one candidate on top of `base` together with the rig's parameters: start at its linear estimate,
     Jacobian columns of the rig's parameters from the signatures, of its own parameters by finite differences
     there, then carry on from a fresh finite-difference Jacobian at that solution; return the fitted model.
@@ -158,19 +161,46 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     gain 0.53 and time constant 0.67 s: the screening's 1.01 at 2 s costs 7,761, the best rung, 0.50 at 0.57 s, 8,222;
     fitted from the first, 1.22 at 1.91 s, cost 1,585; from the rung, 0.47 at 0.62 s, cost 286). Nor do they tell
     which rung: seed 54's watflex-5c75d7b3 (0.60 at 0.39 s) scans cheapest at 1.13 s (731,806, then 0.57 s at 734,700);
-    fitted, the first ends at 1.30 at 1.39 s, |r|^2 35,808, the second at 0.63 at 0.44 s, 3,600."""
+    fitted, the first ends at 1.30 at 1.39 s, |r|^2 35,808, the second at 0.63 at 0.44 s, 3,600.
+
+    A ripple's period is scanned two ways from the same rung simulations (scan.period_scans): beside the rig's columns,
+    and beside those and the signatures of the other candidates fitted with it (`others`, the round's shortlist:
+    scan.beside), what else may be missing. Where the second way's choice (around the refit rig or, with parameters at
+    their bounds, the datasheet's: the cheaper) is more than half a ladder rung from the first's, it is fitted too and
+    returned under 'also': a second fit of the candidate, judged by the round as any other (pipeline: validation,
+    parameters charged). Beside another missing effect the scan alone takes a period that mimics it (seed 68,
+    watflex-db048a3c: a 1.35 N m elbow ripple at 0.82 rad beside a Coulomb friction of 0.86 / 0.99 N m, scanned at
+    0.116 rad; beside the others at 1.05 rad, fitted to 1.04 rad: |r|^2 1.50e8 against the wrong period's 0.96e8 in
+    the fit's units, yet training 0.336 of the excess removed against 0.260, and once the friction is found beside it,
+    0.82 rad). Beside them alone a single ripple was lost to a wrong period where a friction's stick-slip columns took
+    up what a linear picture could (seed 66, watflex-10180306: 0.176 rad for 0.42); hence both, and the round's judge.
+    The least |r|^2 does not choose between them: it is what the fit minimises, not what the round keeps."""
     rig = rig_slots(data)
     u_rig, lo_rig, hi_rig = internal_start(rig, [value_of(base, s) for s in rig])
     cost = lambda r: refit_cost(rig_columns, r, u_rig, lo_rig, hi_rig)  # noqa: E731
     values = step_search(evaluate, cand, base, cost=cost)
-    values, scanned = scan_period(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig)
-    if scanned is not None and at_bounds(data, base):  # the scan again around the rig as the datasheet gives it
-        sheet = Model(base.effects, {})
-        u_sheet = internal_start(rig, [value_of(sheet, s) for s in rig])[0]
-        again, again_cost = scan_period(evaluate, cand, sheet, values, lambda r: refit_cost(rig_columns, r, u_sheet, lo_rig, hi_rig),
-                                        rig_columns, u_sheet, lo_rig, hi_rig)
-        if again_cost is not None and again_cost < scanned:
-            values, base = again, sheet
+    extra = beside(cand, others) if cand.periodic else None
+
+    def scans(around: Model, given: list[dict[str, float]]) -> list[tuple[dict[str, float], float, Model]]:
+        """The period scanned around `around`'s rig, beside the rig alone and (`extra`) beside the others too, each way
+        from its values `given`."""
+        u = internal_start(rig, [value_of(around, s) for s in rig])[0]
+        ways = [(lambda r: refit_cost(rig_columns, r, u, lo_rig, hi_rig), (rig_columns, u, lo_rig, hi_rig), given[0])]
+        if extra is not None:
+            wide = (np.hstack([rig_columns, extra[0]]), np.concatenate([u, extra[1]]), np.concatenate([lo_rig, extra[2]]),
+                    np.concatenate([hi_rig, extra[3]]))
+            ways.append((lambda r: refit_cost(wide[0], r, *wide[1:]), wide, given[-1]))
+        return [(v, c, around) for v, c in period_scans(evaluate, cand, around, values, ways)]
+
+    found = scans(base, [values, values])
+    again = []  # each way again around the rig as the datasheet gives it, from that way's choice
+    if found and at_bounds(data, base):
+        again = scans(Model(base.effects, {}), [v for v, _, _ in found])
+    if found:
+        values, _, base = min([found[0], *again[:1]], key=lambda vcb: vcb[1])
+    second = min(found[1:] + again[1:], key=lambda vcb: vcb[1], default=None)
+    if second and abs(math.log(second[0][cand.periodic] / values[cand.periodic])) <= 0.5 * math.log(PERIOD_LADDER):
+        second = None
     failed = {"effect": cand.effect, "where": cand.where}
     starts = [values]
     for rung, _ in scan_shape(evaluate, cand, base, values, cost, rig_columns, u_rig, lo_rig, hi_rig):
@@ -179,11 +209,16 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
     fits = [guarded(failed, fit_from, data, evaluate, base, cand, rig_columns, iters, start) for start in starts]
     fitted = [f for f in fits if "model" in f]
     if not fitted:
-        return fits[0]
-    if len(fitted) > 1:  # the fits' Huber costs have thresholds of their own starts: judged by |r|^2
-        runs = evaluate([f["model"] for f in fitted])
-        fitted = [fitted[int(np.argmin([math.inf if r is None else float(r @ r) for r in runs]))]]
-    return guarded(failed, carry_on, evaluate, cand, fitted[0], iters)
+        out = fits[0]
+    else:
+        if len(fitted) > 1:  # the fits' Huber costs have thresholds of their own starts: judged by |r|^2
+            runs = evaluate([f["model"] for f in fitted])
+            fitted = [fitted[int(np.argmin([math.inf if r is None else float(r @ r) for r in runs]))]]
+        out = guarded(failed, carry_on, evaluate, cand, fitted[0], iters)
+    if second is not None:  # the scan beside the others: a fit of its own, judged by the round
+        first = guarded(failed, fit_from, data, evaluate, second[2], cand, rig_columns, iters, second[0])
+        out = {**out, "also": [guarded(failed, carry_on, evaluate, cand, first, iters) if "model" in first else first]}
+    return out
 
 
 def guarded(failed: dict, fit, *args) -> dict:
