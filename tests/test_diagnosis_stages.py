@@ -1026,7 +1026,7 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     start = {"amplitude": -1.77, "period": 1.63, "phase": 0.0, "spring": 4.32}  # seed 52's screening estimate
     cost = lambda r: float(r @ r)  # noqa: E731
     none = np.zeros((x.size, 0))
-    (found, found_cost), = period_scans(evaluate, cand, Model(), start, [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)))])
+    (found, found_cost), = period_scans(evaluate, cand, Model(), start, [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)), start)])
     ladder = period_ladder(slots["period"], motion)
     assert min(ladder) == pytest.approx(0.2 * motion) and 4 * motion < max(ladder) <= 8 * motion
     drift = -np.diff(motion / np.array(ladder))  # cycles of phase over the range between neighbouring periods
@@ -1070,8 +1070,8 @@ def test_a_ripples_period_is_scanned_beside_the_other_effects_the_shortlist_name
     assert columns.shape == (x.size, 1) and at.tolist() == [0.0] and low.tolist() == [0.0] and high.tolist() == [5.0]
     assert beside(cand, [cand]) is None
     none = np.zeros((x.size, 0))
-    ways = [(lambda r: float(r @ r), (none, np.zeros(0), np.zeros(0), np.zeros(0))),
-            (lambda r: refit_cost(columns, r, at, low, high), (columns, at, low, high))]
+    ways = [(lambda r: float(r @ r), (none, np.zeros(0), np.zeros(0), np.zeros(0)), start),
+            (lambda r: refit_cost(columns, r, at, low, high), (columns, at, low, high), start)]
 
     def scans(size: float) -> list[tuple[dict, float]]:
         def evaluate(models):

@@ -112,9 +112,9 @@ def period_scans(evaluate, cand: Candidate, base: Model, values: dict[str, float
     period it is linear, to first order, in the a sin + b cos the ripple is. Each period of `period_ladder` is
     simulated twice (the amplitude at its start, phase 0 and pi/2); with the effect's other neutral parameters (a
     spring: its own column) the rest is `scan_rungs'`, done each of several ways on the same simulations: `ways` is a
-    list of (cost, (columns, values, low, high)) - the columns re-solved beside the ripple's at each rung (the rig's,
-    or the rig's and what else may be missing: `beside`) and the cost of a residual with them re-solved -, each
-    optionally with values of its own given instead of `values`. Returns the best (values, cost) of each way, in
+    list of (cost, (columns, values, low, high), values given) - the cost of a residual with the columns re-solved, the
+    columns re-solved beside the ripple's at each rung (the rig's, or the rig's and what else may be missing: `beside`)
+    and the values that way's result is judged against (`values`, or that way's earlier choice). Returns the best (values, cost) of each way, in
     order; [] for an effect without a periodic parameter or whose neutral model diverges."""
     param = next((p for p in CATALOGUE[cand.effect][1] if p.periodic), None)
     if param is None:
@@ -154,7 +154,7 @@ def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     def as_own(v: float, x: np.ndarray) -> dict[str, float]:
         return {name: v, **{n: float(np.clip(x_n, s.low, s.high)) for n, x_n, s in zip(own, x, slots)}}
 
-    return scan_rungs(evaluate, cand, base, values, [(cost, (rig_columns, u_rig, lo_rig, hi_rig))],
+    return scan_rungs(evaluate, cand, base, values, [(cost, (rig_columns, u_rig, lo_rig, hi_rig), values)],
                       shape_ladder(cand.slots[name]), rung, slots, np.array([cand.neutral[n] for n in own]), as_own, [],
                       given=False, local=True)[0]
 
@@ -162,17 +162,17 @@ def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float],
 def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float], ways: list[tuple], rungs: list[float],
                rung_probes, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
                given: bool = True, local: bool = False) -> list[list[tuple[dict[str, float], float]]]:
-    """The scan of one nonlinear parameter over `rungs`: one simulation with the effect at its neutral values, one per
-    `fixed` parameter at its probe (a column shared by all rungs), and at each rung those of `rung_probes(v)`
+    """The scan of one nonlinear parameter over `rungs`: one simulation with the effect at its neutral values, one
+    per `fixed` parameter at its probe (a column shared by all rungs), and at each rung those of `rung_probes(v)`
     ((values, the probe's step) each: the rung's own columns); the columns, with the rig's (`rig`: columns, values,
-    bounds, internal units; one of `ways`, each (cost, rig) or (cost, rig, its own values given), sharing the rung
-    simulations), estimate the rung's coefficients by bounded least squares from `rung_start` within
-    `rung_slots`; the PERIOD_CHECKED rungs whose estimate leaves the least residual are carried PERIOD_STEPS
-    Gauss-Newton steps on (the same columns, the residual simulated at the estimate: stick-slip makes the first
-    estimate rough; there, seed 52's ripple phase was 0.49 rad off and the estimate lost to a wrong period's), and the
-    contenders and (`given`) the values given are returned as (values, their `cost` of the residual), least first; none
-    where the effect at neutral diverges. `as_own(v, coefficients)` gives the effect's values at rung v. With `local`,
-    the steps take the rung's coefficients' slopes at the contender (`_nudge`), not the probes' secants from neutral.
+    bounds, internal units; one of `ways`, each (cost, rig, the values given it), sharing the rung simulations),
+    estimate the rung's coefficients by bounded least squares from `rung_start` within `rung_slots`; the
+    PERIOD_CHECKED rungs whose estimate leaves the least residual are carried PERIOD_STEPS Gauss-Newton steps on
+    (the same columns, the residual simulated at the estimate: stick-slip makes the first estimate rough; there,
+    seed 52's ripple phase was 0.49 rad off and the estimate lost to a wrong period's), and the contenders and
+    (`given`) the values given are returned as (values, their `cost` of the residual), least first; none where the
+    effect at neutral diverges. `as_own(v, coefficients)` gives the effect's values at rung v. With `local`, the
+    steps take the rung's coefficients' slopes at the contender (`_nudge`), not the probes' secants from neutral.
     One such list per way, in order (all [] where the effect at neutral diverges)."""
     zero = {**values, **cand.neutral}
     probes = [(v, rung_probes(v)) for v in rungs]
@@ -181,8 +181,8 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     if any(r is None for r in runs[:1 + len(fixed)]):
         return [[] for _ in ways]
     r0, shared = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(fixed, runs[1:])]
-    return [_carry(evaluate, cand, base, way[2] if len(way) > 2 else values, way[0], way[1], probes, runs, r0, shared, rung_slots,
-                   rung_start, as_own, fixed, given, local) for way in ways]
+    return [_carry(evaluate, cand, base, given_values, cost, rig, probes, runs, r0, shared, rung_slots, rung_start,
+                   as_own, fixed, given, local) for cost, rig, given_values in ways]
 
 
 def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost, rig: tuple, probes: list, runs: list,
