@@ -1135,6 +1135,7 @@ def test_a_ripple_is_fitted_again_from_the_period_the_scan_beside_the_others_cho
         else:
             assert [a["model"].effects[-1]["period"] for a in out["also"]] == [truth["period"]]
             assert out["also"][0]["model"].effects[-1]["amplitude"] == truth["amplitude"]
+            assert out["also"][0]["start"] == effect_fit.BESIDE_START  # the report tells the two fits apart
 
 
 DWELL_TRUTH = {"gain": 0.53, "time_constant": 0.67}  # a dwell-time stiction like seed 63's watflex-bddd453b (0.527, 0.666 s)

@@ -29,6 +29,7 @@ FIT_ITERATIONS = 6  # Levenberg-Marquardt iterations of a candidate fit (one sim
 QUANTUM_STEPS = 2  # a quantised parameter tries its rounded estimate and this many steps either side
 STEP_LADDER = 1.25  # ... and a ladder of steps from 1 up to its bound, each this much longer than the last
 STEP_ROUNDS = 3  # a quantised parameter's step is searched again after the fit of the rest, this many times at most
+BESIDE_START = "period scanned beside the round's other candidates"  # the report's label of a ripple's second fit
 
 
 def step_search(evaluate, cand: Candidate, base: Model, start: dict[str, float] | None = None,
@@ -217,7 +218,8 @@ def fit_candidate(data: Data, evaluate, base: Model, cand: Candidate, rig_column
         out = guarded(failed, carry_on, evaluate, cand, fitted[0], iters)
     if second is not None:  # the scan beside the others: a fit of its own, judged by the round
         first = guarded(failed, fit_from, data, evaluate, second[2], cand, rig_columns, iters, second[0])
-        out = {**out, "also": [guarded(failed, carry_on, evaluate, cand, first, iters) if "model" in first else first]}
+        again = guarded(failed, carry_on, evaluate, cand, first, iters) if "model" in first else first
+        out = {**out, "also": [{**again, "start": BESIDE_START}]}
     return out
 
 

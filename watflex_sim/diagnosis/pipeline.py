@@ -158,7 +158,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
                                "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
                                "validation_noise_ratio": round(r["held_out"]["noise_ratio"], 4),
-                               "score": round(r["score"], 4)} for r in fitted])
+                               "score": round(r["score"], 4)} | ({"start": r["start"]} if "start" in r else {})
+                              for r in fitted])
         # a later finding must remove the excess that asked for its round, but for the effect that frees a rig
         # parameter pinned at its tolerance bound (beyond_tolerance): that is evidence of its own
         best = fitted[0]
