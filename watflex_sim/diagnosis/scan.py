@@ -114,8 +114,9 @@ def period_scans(evaluate, cand: Candidate, base: Model, values: dict[str, float
     spring: its own column) the rest is `scan_rungs'`, done each of several ways on the same simulations: `ways` is a
     list of (cost, (columns, values, low, high), values given) - the cost of a residual with the columns re-solved, the
     columns re-solved beside the ripple's at each rung (the rig's, or the rig's and what else may be missing: `beside`)
-    and the values that way's result is judged against (`values`, or that way's earlier choice). Returns the best (values, cost) of each way, in
-    order; [] for an effect without a periodic parameter or whose neutral model diverges."""
+    and the values that way's result is judged against (`values`, or that way's earlier choice). Returns the best
+    (values, cost) of each way, in order; [] for an effect without a periodic parameter or whose neutral model
+    diverges."""
     param = next((p for p in CATALOGUE[cand.effect][1] if p.periodic), None)
     if param is None:
         return []
