@@ -685,6 +685,31 @@ def test_a_later_finding_must_remove_the_excess_that_asked_for_it():
     assert excess_gain(held(1.1, 1.25), held(0.9, 1.0)) == 0.0
 
 
+def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative():
+    """validate.rival, on the reports' own figures. Seed 70's watflex-76acf3b0 (a 0.189 kg tip payload; refit
+    model at 4.60 x the noise on validation): the elbow torque gain chosen at 0.738 x, the payload at 0.806 x,
+    9 % worse but both below the floor and the payload earning its place: an alternative. Seed 69's
+    watflex-d72dd211: a position-dependent friction at 0.879 x beside the dwell stiction's 0.731 x, with
+    training 4.9 % better for 4 parameters (under MIN_GAIN's 2 % each): not one. Seed 69's laser_arm-96cd750a:
+    0.8945 x against 0.8947 x, within ALTERNATIVE_MARGIN with no gain of its own: one. Above the floor only the
+    relative margin counts."""
+    from watflex_sim.diagnosis.validate import gains, rival
+
+    def scores(mean):
+        return {"noise_ratio": mean, "worst_channel": "strain_2A", "worst_ratio": mean, "channel_ratios": {"strain_2A": mean}}
+
+    def fitted(train_before, held_before, train_after, held_after, n_params=1):
+        return gains({"train": scores(train_after), "held_out": scores(held_after), "n_params": n_params},
+                     scores(train_before), scores(held_before))
+
+    gain, payload = fitted(4.6, 4.603, 0.71, 0.7381), fitted(4.6, 4.603, 0.77, 0.8063)
+    assert rival(payload, gain, later=False)
+    dwell = fitted(0.92, 0.919, 0.72, 0.7309, 2)
+    assert not rival(fitted(0.92, 0.919, 0.92 * (1 - 0.0489), 0.879, 4), dwell, later=False)
+    assert rival(fitted(1.0, 0.895, 1.0, 0.8945, 4), fitted(1.0, 0.895, 0.96, 0.8947), later=False)
+    assert not rival(fitted(4.6, 4.603, 1.02, 1.05), fitted(4.6, 4.603, 0.97, 0.98), later=False)  # 7 % worse, above
+    assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False)  # 2.5 % worse
+
 def test_with_training_within_the_noise_validation_decides():
     """shortfall(): seed 59's laser_arm-7cf6ef08 (a beam 0.64 x as stiff; report of 0be39b8): training at
     0.86 x the noise, validation at 1.48 x (mean) with voltage_cmd at 1.92 x; the fitted stiffness took

@@ -33,10 +33,9 @@ from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candid
                         signatures, with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
 from .uncertainty import final_intervals
-from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, shortfall,
+from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, rival, shortfall,
                        vague_findings, verdict_of, verdict_reason, within_noise)
 
-ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
 
@@ -187,8 +186,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
-        alternatives += [alternative_entry(data, r, best, n) for r in fitted if places(r) != places(best)
-                         and r["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * best["held_out"]["noise_ratio"]]
+        alternatives += [alternative_entry(data, r, best, n) for r in fitted if places(r) != places(best) and rival(r, best, later)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
@@ -210,7 +208,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         judged = {(loser["effect"], loser["where"], winner["effect"]) for loser, winner in tried}  # judged again beside the later findings
         alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
             alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
-            if loser["held_out"]["noise_ratio"] <= (1 + ALTERNATIVE_MARGIN) * winner["held_out"]["noise_ratio"]]
+            if rival(loser, winner, later=True)]
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
