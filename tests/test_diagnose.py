@@ -259,10 +259,11 @@ def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).
     Closed form: r(m) = r0 (1 + m) at m = 1 and 0.5 leaves 4 x and 2.25 x (gains -3, -1.25): no further.
     r(m) = r0 (1 - m / 0.4)^2 at m = 0.1 leaves 0.5625^2 of the cost (gain 0.684, half-way 0.414): rising,
-    so on to 0.2 (gain 1 - 0.5^4 = 0.9375) and 0.4 (gain 1), where the estimate moves too. r(m) = r0 |1 - m / 3.2|
-    from 0.2: 0.4, 0.8 (FURTHER_STEPS = 2), gain 1 - 0.75^2."""
+    so on to 0.2 (gain 1 - 0.5^4 = 0.9375) and 0.4 (gain 1), where the estimate moves too; searched between 0.2 and
+    0.8 it stays (nothing gains more than 1). r(m) = r0 |1 - m / 3.2| from 0.2: 0.4, 0.8 (FURTHER_STEPS = 2), then
+    searched up to twice that, 1.6: gain 1 - 0.5^2."""
     from watflex_sim.diagnosis import Candidate, Model, Slot
-    from watflex_sim.diagnosis.screening import FURTHER_STEPS, rescreen
+    from watflex_sim.diagnosis.screening import ALONG_TOLERANCE, FURTHER_STEPS, rescreen
 
     r0 = np.ones(10)
     law = {"closer": lambda m: r0 * (1 - m / 0.4) ** 2, "further": lambda m: r0 * (1 + m), "far": lambda m: r0 * abs(1 - m / 3.2)}
@@ -278,7 +279,26 @@ def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     rescreen(evaluate, [closer, further, far], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
     assert closer.checked == pytest.approx(1.0, abs=1e-12) and closer.estimate == {"m": pytest.approx(0.4)}
     assert further.checked == pytest.approx(1 - 1.5**2, rel=1e-12) and further.estimate == {"m": 1.0}
-    assert FURTHER_STEPS == 2 and far.checked == pytest.approx(1 - 0.75**2, rel=1e-12)
+    assert FURTHER_STEPS == 2 and far.checked == pytest.approx(1 - 0.5**2, abs=0.003)  # Brent stops within its
+    assert far.estimate["m"] == pytest.approx(1.6, abs=3 * ALONG_TOLERANCE * 0.2)  # tolerance of the bound
+
+
+def test_rescreen_finds_a_basin_between_two_moves():
+    """rescreen(): r(m) = r0 (0.2 + 0.8 min(1, |m - 0.27| / 0.25)), a basin at 0.27 with a plateau beyond 0.52 (a
+    link's stiffness: seed 70's watflex-0eef1dc1, estimated at x1.99, moved on to x3.95 on the plateau past the basin
+    at x2.62). From 0.1 (half-way 0.05): gains 0.446 and 0.183, rising; on to 0.2 (gain 1 - 0.424^2), not to 0.4
+    (1 - 0.616^2); searched between 0.1 and 0.4 (search_along), the estimate is the basin's 0.27 (gain 1 - 0.2^2),
+    to ALONG_TOLERANCE x 0.1."""
+    from watflex_sim.diagnosis import Candidate, Model, Slot
+    from watflex_sim.diagnosis.screening import ALONG_TOLERANCE, rescreen
+
+    r0 = np.ones(10)
+    cand = Candidate("basin", "x", {"m": 0.2}, {"m": Slot(("effect", -1, "m"), -10.0, 10.0)}, {"m": 0.0},
+                     estimate={"m": 0.1}, gain=0.5)
+    evaluate = lambda models: [r0 * (0.2 + 0.8 * min(1.0, abs(m.effects[-1]["m"] - 0.27) / 0.25)) for m in models]  # noqa: E731
+    rescreen(evaluate, [cand], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
+    assert cand.estimate["m"] == pytest.approx(0.27, abs=ALONG_TOLERANCE * 0.1)
+    assert cand.checked == pytest.approx(1 - 0.2**2, abs=1e-3)
 
 
 def test_shortlist_swaps_a_candidate_its_simulation_refutes():
