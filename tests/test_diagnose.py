@@ -301,6 +301,25 @@ def test_rescreen_finds_a_basin_between_two_moves():
     assert cand.checked == pytest.approx(1 - 0.2**2, abs=1e-3)
 
 
+def test_rescreen_finds_a_far_basin_on_the_ladder():
+    """rescreen(): a link-stiffness-like ratio (log-scaled, neutral 1, `ladder`) whose residual is flat near neutral
+    and has a basin at x0.25: r(m) = r0 (1 - 0.9 exp(-(ln(m / 0.25) / 0.15)^2)) (seed 71's watflex-0f5ae0dc, link 2
+    x0.257: 325 x the noise from x0.65 to x1, 30 x at x0.25). From a linear estimate of x0.9 the moves stay on the
+    flat; the ladder's rungs are 1.3^k, k = -7..7 (LADDER_REACH 8), and the rung 1.3^-5 = x0.269 has the largest gain,
+    1 - (1 - 0.9 exp(-(ln(0.269 / 0.25) / 0.15)^2))^2: the estimate goes there."""
+    from watflex_sim.diagnosis import Candidate, Model, Slot
+    from watflex_sim.diagnosis.screening import LADDER_RATIO, ladder, rescreen
+
+    r0 = np.ones(10)
+    law = lambda m: r0 * (1 - 0.9 * math.exp(-((math.log(m / 0.25) / 0.15) ** 2)))  # noqa: E731
+    cand = Candidate("stiffness", "link", {"ratio": 0.9}, {"ratio": Slot(("effect", -1, "ratio"), 0.02, 1000.0, True)},
+                     {"ratio": 1.0}, estimate={"ratio": 0.9}, gain=0.05, ladder="ratio")
+    assert ladder(cand) == pytest.approx([LADDER_RATIO**k for k in range(-7, 8) if k])
+    rescreen(lambda models: [law(m.effects[-1]["ratio"]) for m in models], [cand], Model(), np.zeros((10, 0)), [],
+             np.zeros(0), r0)
+    assert cand.estimate["ratio"] == pytest.approx(LADDER_RATIO**-5, rel=1e-12)
+    assert cand.checked == pytest.approx(1 - float(law(LADDER_RATIO**-5)[0]) ** 2, rel=1e-12)
+
 def test_shortlist_swaps_a_candidate_its_simulation_refutes():
     """shortlist(): a candidate that rescreen found worse than no effect at all (checked < 0) gives its
     place to the best one it found better that is not on the list (seed 11, an independent simulator's

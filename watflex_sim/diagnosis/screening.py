@@ -42,6 +42,10 @@ SIMULATED_TIE = 0.8  # a candidate rescreen simulated at this share of the best 
 FURTHER_STEPS = 2  # rescreen: times an estimate whose simulated gain still rises is moved on to twice its distance
 ALONG_TOLERANCE = 0.01  # rescreen: an estimate moved on is then searched for between half and twice its distance
 # (bounded Brent) to this share of the distance from neutral it started at, in internal units (a ratio's log)
+LADDER_RATIO = 1.3  # rescreen: a `wide` log-scaled parameter with a neutral (a link's stiffness) is also simulated at
+LADDER_REACH = 8.0  # rungs this ratio apart, out to this factor either side of neutral: its residual is flat near neutral
+# and its basin narrow far from it (seed 71, watflex-0f5ae0dc, link 2 x0.257: training 325 x the noise from x0.65 to
+# x1, 30 x at x0.25, 291 x at x0.18; seed 70's x2.866: its basin's skirt spans x2.3-x3.3, a ratio of 1.43)
 DIVERGED = 1e6  # the search's loss where a simulation diverges (a gain is a share of the cost: at most 1)
 RESCREEN = 6  # the best-screening candidates whose linear gain is checked by simulation (rescreen)
 MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (validate.gains: the
@@ -79,6 +83,7 @@ class Candidate:
     checked: float | None = None  # rescreen: the gain simulated at (and half-way to) the estimate
     periodic: str = ""  # a ripple's periodic parameter (effects.Param.periodic), with the values screened in quadrature
     periods: tuple[float, ...] = ()  # (RIPPLE_CYCLES), besides its start
+    ladder: str = ""  # a `wide` log-scaled parameter with a neutral (a link's stiffness): rescreen's ladder (LADDER_RATIO)
 
     def model(self, base: Model, values: dict[str, float]) -> Model:
         return Model(base.effects + [dict(effect=self.effect, where=self.where, **values)], dict(base.parameters))
@@ -134,7 +139,8 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
     levels = (1.0, LARGE_PROBE) if any(p.scale == "effort" or p.wide for p in params) else (1.0,)
     if any(p.scale == "effort" for p in params):
         levels = (SMALL_PROBE,) + levels
-    if any(p.wide and p.log and p.neutral is not None for p in params):
+    ladder = next((p.name for p in params if p.wide and p.log and p.neutral is not None), "")
+    if ladder:
         levels += (STIFFER_PROBE,)
     quanta = {p.name: p.quantum for p in params if p.quantum > 0}
     ripple = next((p for p in params if p.periodic), None)
@@ -142,7 +148,8 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
     if ripple:  # its slot is in motion ranges
         motion = scale_of(data, ripple, where)
         periods = tuple(motion / n for n in RIPPLE_CYCLES if slots[periodic].low <= motion / n <= slots[periodic].high)
-    return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta, periodic=periodic, periods=periods)
+    return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta, periodic=periodic, periods=periods,
+                     ladder=ladder)
 
 
 def excited(data: Data, effect: str, where: str) -> bool:
@@ -331,7 +338,9 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     Where the gain at the estimate beats the gain half-way, the estimate is moved on to twice its distance from
     neutral (`further`), at most FURTHER_STEPS times while that gains more; `checked` and `estimate` follow
     (seed 46, a laser beam 0.26 x as stiff as the datasheet: estimated at 0.43 x, simulated at 26 %, behind
-    the hub's compliance at 77 %, and never fitted)."""
+    the hub's compliance at 77 %, and never fitted), and one moved on is searched for between the moves
+    (`search_along`). A candidate with a `ladder` parameter is simulated on its rungs too (`ladder`), and the best
+    rung taken where it gains more."""
     todo = [c for c in cands if not c.quanta and c.gain > -math.inf]
     if not todo:
         return
@@ -376,6 +385,21 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     for key, k in made.items():  # between the moves: the line's best lies anywhere from half to twice the last
         cand, first = starts[key]
         search_along(evaluate, cand, base, first, 2.0 ** k, gain_of)
+    rungs = [(cand, value) for cand in todo for value in ladder(cand)]
+    for (cand, value), r in zip(rungs, evaluate([cand.model(base, {**cand.estimate, cand.ladder: value}) for cand, value in rungs])):
+        gain = gain_of(r)
+        if r is not None and (cand.checked is None or gain > cand.checked):
+            cand.checked, cand.estimate = gain, {**cand.estimate, cand.ladder: value}
+
+
+def ladder(cand: Candidate) -> list[float]:
+    """Values of the candidate's `ladder` parameter to simulate: LADDER_RATIO apart from neutral, out to LADDER_REACH x
+    either side, within its slot ([] without one)."""
+    if not cand.ladder:
+        return []
+    neutral, slot = cand.neutral[cand.ladder], cand.slots[cand.ladder]
+    steps = int(math.log(LADDER_REACH) / math.log(LADDER_RATIO) + 1e-9)
+    return [v for k in range(-steps, steps + 1) if k and slot.low <= (v := neutral * LADDER_RATIO**k) <= slot.high]
 
 
 def search_along(evaluate, cand: Candidate, base: Model, first: dict[str, float], far: float, gain_of) -> None:
