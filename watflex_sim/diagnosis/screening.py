@@ -1,12 +1,13 @@
 """Screening: which catalogue effect's signature the residual carries, and which candidates to fit in full.
 
-Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings
-can show (`excited`). `signatures` simulates each once per parameter (and probe level) around the
-current model, half as fine as the model (SCREEN_FINER); `screen` scores each by how much of the training
-residual its signature explains beyond refitting the rig's parameters and the effects found so far
-(`with_findings`), and keeps that linear estimate as its start; `rescreen` checks the best by simulation at
-that estimate; `shortlist` names the candidates to fit in full (effect_fit.fit_candidate), and `concealed`
-one more: the best by the same signatures against the datasheet model's residual, where the refit took an effect up.
+Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings can show
+(`excited`). `signatures` simulates each once per parameter (and probe level) around the current model, half as fine
+as the model (SCREEN_FINER); `screen` scores each by how much of the training residual its signature explains beyond
+refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate as its
+start; `rescreen` checks the best by simulation at that estimate (moved on while it gains, searched between the
+moves, a link's stiffness on a ladder of rungs too); `shortlist` names the candidates to fit in full
+(effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the datasheet model's
+residual, where the refit took an effect up.
 """
 from __future__ import annotations
 
@@ -42,9 +43,9 @@ SIMULATED_TIE = 0.8  # a candidate rescreen simulated at this share of the best 
 FURTHER_STEPS = 2  # rescreen: times an estimate whose simulated gain still rises is moved on to twice its distance
 ALONG_TOLERANCE = 0.01  # rescreen: an estimate moved on is then searched for between half and twice its distance
 # (bounded Brent) to this share of the distance from neutral it started at, in internal units (a ratio's log)
-LADDER_RATIO = 1.3  # rescreen: a `wide` log-scaled parameter with a neutral (a link's stiffness) is also simulated at
-LADDER_REACH = 8.0  # rungs this ratio apart, out to this factor either side of neutral: its residual is flat near neutral
-# and its basin narrow far from it (seed 71, watflex-0f5ae0dc, link 2 x0.257: training 325 x the noise from x0.65 to
+LADDER_RATIO = 1.3  # rescreen: a `wide` log-scaled parameter with a neutral (a link's stiffness) is simulated at
+LADDER_REACH = 8.0  # rungs this ratio apart, out to this factor either side of neutral: its residual is flat near
+# neutral and its basin narrow far from it (seed 71, watflex-0f5ae0dc, link 2 x0.257: training 325 x the noise from x0.65 to
 # x1, 30 x at x0.25, 291 x at x0.18; seed 70's x2.866: its basin's skirt spans x2.3-x3.3, a ratio of 1.43)
 DIVERGED = 1e6  # the search's loss where a simulation diverges (a gain is a share of the cost: at most 1)
 RESCREEN = 6  # the best-screening candidates whose linear gain is checked by simulation (rescreen)
@@ -83,7 +84,7 @@ class Candidate:
     checked: float | None = None  # rescreen: the gain simulated at (and half-way to) the estimate
     periodic: str = ""  # a ripple's periodic parameter (effects.Param.periodic), with the values screened in quadrature
     periods: tuple[float, ...] = ()  # (RIPPLE_CYCLES), besides its start
-    ladder: str = ""  # a `wide` log-scaled parameter with a neutral (a link's stiffness): rescreen's ladder (LADDER_RATIO)
+    ladder: str = ""  # a `wide` log-scaled parameter with a neutral (a link's stiffness): rescreen's `ladder`
 
     def model(self, base: Model, values: dict[str, float]) -> Model:
         return Model(base.effects + [dict(effect=self.effect, where=self.where, **values)], dict(base.parameters))
@@ -386,7 +387,8 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
         cand, first = starts[key]
         search_along(evaluate, cand, base, first, 2.0 ** k, gain_of)
     rungs = [(cand, value) for cand in todo for value in ladder(cand)]
-    for (cand, value), r in zip(rungs, evaluate([cand.model(base, {**cand.estimate, cand.ladder: value}) for cand, value in rungs])):
+    runs = evaluate([cand.model(base, {**cand.estimate, cand.ladder: value}) for cand, value in rungs]) if rungs else []
+    for (cand, value), r in zip(rungs, runs):
         gain = gain_of(r)
         if r is not None and (cand.checked is None or gain > cand.checked):
             cand.checked, cand.estimate = gain, {**cand.estimate, cand.ladder: value}
@@ -405,10 +407,11 @@ def ladder(cand: Candidate) -> list[float]:
 def search_along(evaluate, cand: Candidate, base: Model, first: dict[str, float], far: float, gain_of) -> None:
     """An estimate `rescreen` moved on from `first` to `far` times its distance from neutral, searched for between
     half and twice that along the same line (bounded Brent on `gain_of` of a simulation, to ALONG_TOLERANCE of
-    first's distance); kept where it gains more. Moving on doubles the distance, and a residual that is not convex along the line can have
-    its basin between two moves: seed 70's watflex-0eef1dc1, link 2 x2.866 as stiff with the rig's EI and inertia
-    refit to their bounds, estimated at x1.99 and moved on to x3.95, on a plateau (training 25.7 x the noise) beyond
-    the basin at x2.62 (5.3 x), which is 3 % wide; fitted from x3.95, a spurious elbow compliance made up the rest."""
+    first's distance); kept where it gains more. Moving on doubles the distance, and a residual that is not convex
+    along the line can have its basin between two moves: seed 70's watflex-0eef1dc1, link 2 x2.866 as stiff with the
+    rig's EI and inertia refit to their bounds, estimated at x1.99 and moved on to x3.95, on a plateau (training 25.7 x
+    the noise) beyond the basin at x2.62 (5.3 x), which is 3 % wide; fitted from x3.95, a spurious elbow compliance
+    made up the rest."""
     tried: dict[float, float] = {}
 
     def loss(s: float) -> float:
@@ -424,7 +427,7 @@ def search_along(evaluate, cand: Candidate, base: Model, first: dict[str, float]
 
 
 def _internal(cand: Candidate, name: str, value: float) -> tuple[float, float, bool]:
-    """(neutral, value) of a parameter in its internal units (a log-scaled ratio's logarithm) and whether they are logs."""
+    """(neutral, value) of a parameter in its internal units (a log-scaled ratio's logarithm), and whether logs."""
     neutral, slot = cand.neutral[name], cand.slots[name]
     log = slot.log and neutral > 0 and value > 0
     return (math.log(neutral), math.log(value), True) if log else (neutral, value, False)

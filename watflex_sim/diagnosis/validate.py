@@ -1,17 +1,17 @@
 """Validation: whether a finding earns its place, and the verdict.
 
-Contract: a fitted candidate is scored by `gains` against the model before it (training and validation
-noise ratios, the share of validation's excess over the noise it removes); it earns its place (`shortfall`
-says why not) when training falls by MIN_GAIN per parameter and validation by MIN_HELD_GAIN, and a later
-finding also removes MIN_EXCESS_GAIN of what validation has above the noise (with training already within the
-noise, removing MIN_EXCESS_GAIN of validation's excess without making training worse is enough; in a round
-asked for by windows far above their local null, locate.local_excess, removing LOCAL_GAIN of their excess).
-`rival` says which other fitted candidates are alternatives to the chosen one. `eliminate` drops findings the final model does not need on validation data (or those windows);
-`vague_findings` those the data do not tell from no effect. `verdict_of`: `nothing_missing` only when a model
-without findings is within NOISE_MARGIN x the noise on training AND validation data and no window is far above
-its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the excess),
-`unexplained` otherwise, and whenever a channel's residual is a static curve of its own value (`curved_channels`:
-a nonlinear characteristic the catalogue does not have); `verdict_reason` says why in words.
+Contract: a fitted candidate is scored by `gains` against the model before it (training and validation noise ratios,
+the share of validation's excess over the noise it removes); it earns its place (`shortfall` says why not) when
+training falls by MIN_GAIN per parameter and validation by MIN_HELD_GAIN, and a later finding also removes
+MIN_EXCESS_GAIN of what validation has above the noise (with training already within the noise, removing
+MIN_EXCESS_GAIN of validation's excess without making training worse is enough; in a round asked for by windows far
+above their local null, locate.local_excess, removing LOCAL_GAIN of their excess). `rival` says which other fitted
+candidates are alternatives to the chosen one. `eliminate` drops findings the final model does not need on validation
+data (or those windows); `vague_findings` those the data do not tell from no effect. `verdict_of`: `nothing_missing`
+only when a model without findings is within NOISE_MARGIN x the noise on training AND validation data and no window
+is far above its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
+excess), `unexplained` otherwise, and whenever a channel's residual is a static curve of its own value
+(`curved_channels`: a nonlinear characteristic the catalogue does not have); `verdict_reason` says why in words.
 """
 from __future__ import annotations
 
