@@ -186,7 +186,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             break
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
-        alternatives += [alternative_entry(data, r, best, n) for r in fitted if places(r) != places(best) and rival(r, best, later)]
+        alternatives += [alternative_entry(data, r, best, n) for r in fitted
+                         if places(r) != places(best) and rival(r, best, later)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")

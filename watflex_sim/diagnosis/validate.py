@@ -38,7 +38,7 @@ CURVE_SIGNIFICANCE = 20.0  # the curve's gain over what chance gives two regress
 CURVE_BEND = 5.0  # ... where it bends away from the line by this many noise sd somewhere (at the channel's peaks): a
 # characteristic, not a misfit of 1 % of the noise's variance that only many samples make significant
 CURVE_SHARE = 0.5  # ... and this share of what a gain and an offset leave above the noise: a nonlinear characteristic
-ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's is an alternative (rival)
+ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's: an alternative
 LOCAL_GAIN = 0.5  # in a round asked for by windows far above their local null (locate.local_excess), a finding must
 # remove this share of their excess, without making training or validation worse
 
