@@ -320,6 +320,7 @@ def test_rescreen_finds_a_far_basin_on_the_ladder():
     assert cand.estimate["ratio"] == pytest.approx(LADDER_RATIO**-5, rel=1e-12)
     assert cand.checked == pytest.approx(1 - float(law(LADDER_RATIO**-5)[0]) ** 2, rel=1e-12)
 
+
 def test_shortlist_swaps_a_candidate_its_simulation_refutes():
     """shortlist(): a candidate that rescreen found worse than no effect at all (checked < 0) gives its
     place to the best one it found better that is not on the list (seed 11, an independent simulator's

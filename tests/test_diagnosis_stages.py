@@ -710,6 +710,7 @@ def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative
     assert not rival(fitted(4.6, 4.603, 1.02, 1.05), fitted(4.6, 4.603, 0.97, 0.98), later=False)  # 7 % worse, above
     assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False)  # 2.5 % worse
 
+
 def test_with_training_within_the_noise_validation_decides():
     """shortfall(): seed 59's laser_arm-7cf6ef08 (a beam 0.64 x as stiff; report of 0be39b8): training at
     0.86 x the noise, validation at 1.48 x (mean) with voltage_cmd at 1.92 x; the fitted stiffness took

@@ -45,8 +45,8 @@ ALONG_TOLERANCE = 0.01  # rescreen: an estimate moved on is then searched for be
 # (bounded Brent) to this share of the distance from neutral it started at, in internal units (a ratio's log)
 LADDER_RATIO = 1.3  # rescreen: a `wide` log-scaled parameter with a neutral (a link's stiffness) is simulated at
 LADDER_REACH = 8.0  # rungs this ratio apart, out to this factor either side of neutral: its residual is flat near
-# neutral and its basin narrow far from it (seed 71, watflex-0f5ae0dc, link 2 x0.257: training 325 x the noise from x0.65 to
-# x1, 30 x at x0.25, 291 x at x0.18; seed 70's x2.866: its basin's skirt spans x2.3-x3.3, a ratio of 1.43)
+# neutral and its basin narrow far from it (seed 71, watflex-0f5ae0dc, link 2 x0.257: training 325 x the noise from
+# x0.65 to x1, 30 x at x0.25, 291 x at x0.18; seed 70's x2.866: its basin's skirt spans x2.3-x3.3, a ratio of 1.43)
 DIVERGED = 1e6  # the search's loss where a simulation diverges (a gain is a share of the cost: at most 1)
 RESCREEN = 6  # the best-screening candidates whose linear gain is checked by simulation (rescreen)
 MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (validate.gains: the
