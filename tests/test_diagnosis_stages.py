@@ -277,6 +277,26 @@ def test_proposed_experiment_separates_two_explanations_and_runs(laser_recording
     assert main(["run", str(path), "--out", str(tmp_path / "run"), "--no-plot", "--no-rrd"]) == 0
 
 
+def test_the_sweep_on_the_menu_spans_the_recorded_excursion_and_band(laser_recordings):
+    """The menu's sweep of a 0.4 s step recording at 1 ms control: a sine chirp from the step's start, as far from
+    it as the step went, logarithmic from 2 cycles over the recording (5.01 Hz) to 5 % of the control rate
+    (50 Hz). Its cycles in closed form: f0 T (k - 1) / ln k with k = f1 / f0 (scipy.signal.chirp), 7.8 here."""
+    from watflex_sim.diagnosis.experiment import VARIANTS, _variant
+    from watflex_sim.diagnosis.runner import hold
+
+    data = prepare(laser_recordings, ["a", "b"])
+    hold(data)
+    ref = data.recordings[0].channels["reference"]
+    step = float(np.nanmax(np.abs(ref - ref[0])))
+    signal, = _variant(data, 0, *VARIANTS["as a sweep"])["reference"]
+    v, t = np.asarray(signal["values"]) - ref[0], np.asarray(signal["time_s"])
+    assert v[0] == pytest.approx(0.0, abs=1e-12) and np.max(np.abs(v)) == pytest.approx(step, rel=0.01)
+    f0, f1, span = 2.0 / t[-1], 50.0, t[-1]
+    cycles = f0 * span * (f1 / f0 - 1) / math.log(f1 / f0)
+    assert cycles == pytest.approx(7.8, abs=0.1)
+    assert np.count_nonzero(np.diff(np.sign(v[1:])) != 0) == pytest.approx(2 * cycles, abs=1.0)
+
+
 def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
     """Issue 14's false all-clear: a motor-current error of 1.5 x its noise on one of four channels
     leaves the mean noise ratio near 1.1 (< 1.3) but must not pass as 'within noise'."""
