@@ -275,6 +275,29 @@ def test_the_scorer_names_a_command_delay_where_the_report_does(bench):
     assert sb.true_place({**case, "effect": "delay", "where": "command"}, recs) == "shoulder_torque_cmd+elbow_torque_cmd"
 
 
+def test_the_scorer_records_a_proposed_experiment_as_the_rig_recorded_the_case(bench):
+    """score_benchmark.rig_records(): the experiment a report proposes, run on the case's truth, is recorded as
+    the case's own files were: with the rig's noise (the tip sensor's second-difference noise within 30 % of the
+    datasheet's 0.01 m: a noise-free file was the one the diagnosis could not match to its noise), the same
+    bytes each time, and by the benchmark's recorder (30 segments at half the step differ from ours)."""
+    from watflex_sim.diagnosis.data import measured_noise
+    from watflex_sim.resim import scenario_from_recording
+
+    spec = importlib.util.spec_from_file_location("score_benchmark", ROOT / "tools" / "score_benchmark.py")
+    sb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sb)
+    sys.path.insert(0, str(ROOT / "tools"))
+    out, truth = bench
+    case = next(c for c in truth["cases"] if c["rig"] == "laser_arm" and c["effect"])
+    scenario = scenario_from_recording(read_recording(out / case["recordings"][0]))
+    ours = sb.rig_records(case, scenario).channels["tip_sensor"]
+    again = sb.rig_records(case, scenario).channels["tip_sensor"]
+    theirs = sb.rig_records(case, scenario, {"segments": 30, "step_divisor": 2}).channels["tip_sensor"]
+    noise = load_rig("laser_arm").channels["tip_sensor"]["noise"]
+    assert measured_noise(ours) == pytest.approx(noise, rel=0.3)
+    assert np.array_equal(ours, again) and not np.array_equal(ours, theirs)
+
+
 def test_the_two_joint_setup_moves_both_joints_and_places_effects_on_the_shoulder(tmp_path):
     """`--watflex-setup two_joint`: every allowed place is a place (the shoulder, link 1 and its bridges
     included, which the single-link set-up never excites), the recordings are the observer control of

@@ -133,25 +133,31 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool, recorder: 
 
 def resolves(case: dict, recordings: list, names: list[str], scenario: dict, truth_effect: str, workers: int,
              recorder: dict | None = None) -> bool:
-    """Run the proposed experiment on the "rig" (the case's truth: its effect, parameter errors and
-    dropped channels, recorded as make_benchmark recorded the case: noise on, a seed of its own, and
-    truth.json's `recorder`), diagnose again with it added, and say whether the ambiguity is gone: the
-    true effect named first and no alternative left to it. (Run noise-free on our own discretisation,
-    as until 2026-12-01, the new recording was the one file the refit rig could not match to its noise:
-    seed 71's laser_arm-31e8e2c7 came out `unexplained`, the truth 11.7x the noise.)"""
+    """Run the proposed experiment on the "rig" (rig_records), diagnose again with it added, and say whether
+    the ambiguity is gone: the true effect named first and no alternative left to it."""
+    try:
+        extra = rig_records(case, scenario, recorder)
+    except SimulationError:
+        return False
+    again = diagnose(recordings + [extra], names + ["discriminate.csv"], workers=workers, propose=False)
+    first = again["findings"][0]["effect"] if again["findings"] else NONE
+    return first == truth_effect and not again["alternatives"]
+
+
+def rig_records(case: dict, scenario: dict, recorder: dict | None = None):
+    """The Recording of `scenario` on the case's "rig": its truth (effect, parameter errors, dropped channels),
+    recorded as make_benchmark recorded the case: noise on, a seed of its own (from the case's id), and
+    truth.json's `recorder`. (Run noise-free on our own discretisation, as until 2026-12-01, the new recording was
+    the one file the refit rig could not match to its noise: seed 71's laser_arm-31e8e2c7 came out `unexplained`,
+    the truth 11.7x the noise.)"""
     from make_benchmark import recorder_of, simulate_case
 
     drop = ("elbow_angle",) if case.get("concealment") == "indirect channel" else ()
     effects = [dict(effect=case["effect"], where=case["where"], **case["parameters"])]
     recorded = dict(scenario, noise=True, seed=zlib.crc32(f"{case['id']}/discriminate".encode()),
                     **recorder_of(case["rig"], **(recorder or {})))
-    try:
-        (_, extra), = simulate_case([("discriminate", recorded)], effects, case["refit_parameters"], drop)
-    except SimulationError:
-        return False
-    again = diagnose(recordings + [extra], names + ["discriminate.csv"], workers=workers, propose=False)
-    first = again["findings"][0]["effect"] if again["findings"] else NONE
-    return first == truth_effect and not again["alternatives"]
+    (_, extra), = simulate_case([("discriminate", recorded)], effects, case["refit_parameters"], drop)
+    return extra
 
 
 def _pct(hits: int, total: int) -> str:
