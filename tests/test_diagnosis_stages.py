@@ -712,7 +712,9 @@ def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative
     watflex-d72dd211: a position-dependent friction at 0.879 x beside the dwell stiction's 0.731 x, with
     training 4.9 % better for 4 parameters (under MIN_GAIN's 2 % each): not one. Seed 69's laser_arm-96cd750a:
     0.8945 x against 0.8947 x, within ALTERNATIVE_MARGIN with no gain of its own: one. Above the floor only the
-    relative margin counts."""
+    relative margin counts. Below it, a gap in squares beyond what the floor holds besides white noise
+    (Data.absorbable: 0.283 for the payload case's recordings, 0.013 for seed 71's laser_arm-6b5ba9f1) tells them
+    apart: that case with its proposed sweep run, the true beam x0.33 at 0.800 x and a hub compliance at 0.941 x."""
     from watflex_sim.diagnosis.validate import gains, rival
 
     def scores(mean):
@@ -723,12 +725,24 @@ def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative
                      scores(train_before), scores(held_before))
 
     gain, payload = fitted(4.6, 4.603, 0.71, 0.7381), fitted(4.6, 4.603, 0.77, 0.8063)
-    assert rival(payload, gain, later=False)
+    assert rival(payload, gain, later=False) and rival(payload, gain, later=False, absorbable=0.283)
+    assert not rival(payload, gain, later=False, absorbable=0.013)  # 0.806^2 - 0.738^2 = 0.105
+    beam, hub = fitted(8.65, 8.02, 0.80, 0.8001), fitted(8.65, 8.02, 0.89, 0.9409)
+    assert rival(hub, beam, later=False) and not rival(hub, beam, later=False, absorbable=0.013)
     dwell = fitted(0.92, 0.919, 0.72, 0.7309, 2)
     assert not rival(fitted(0.92, 0.919, 0.92 * (1 - 0.0489), 0.879, 4), dwell, later=False)
     assert rival(fitted(1.0, 0.895, 1.0, 0.8945, 4), fitted(1.0, 0.895, 0.96, 0.8947), later=False)
     assert not rival(fitted(4.6, 4.603, 1.02, 1.05), fitted(4.6, 4.603, 0.97, 0.98), later=False)  # 7 % worse, above
     assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False)  # 2.5 % worse
+
+
+def test_the_absorbable_share_of_the_floor(laser_recordings):
+    """Data.absorbable: a floor twice a channel's white noise is 3/4 not that noise (1 - 1/2^2); as prepared
+    (floor = the noise the recordings show) nothing is; the mean is over recordings and channels."""
+    data = prepare(laser_recordings, ["a", "b"])
+    assert data.absorbable == 0.0
+    data.noise[0] = {c: 2.0 * n for c, n in data.noise[0].items()}
+    assert data.absorbable == pytest.approx(0.75 * len(data.noise[0]) / sum(map(len, data.noise)))
 
 
 def test_with_training_within_the_noise_validation_decides():

@@ -187,7 +187,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         n = len(current.effects)
         places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
         alternatives += [alternative_entry(data, r, best, n) for r in fitted
-                         if places(r) != places(best) and rival(r, best, later)]
+                         if places(r) != places(best) and rival(r, best, later, data.absorbable)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
@@ -209,7 +209,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         judged = {(loser["effect"], loser["where"], winner["effect"]) for loser, winner in tried}  # judged again beside the later findings
         alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
             alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
-            if rival(loser, winner, later=True)]
+            if rival(loser, winner, later=True, absorbable=data.absorbable)]
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
