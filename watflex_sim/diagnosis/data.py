@@ -72,7 +72,8 @@ class Data:
         """The share of the noise floor's square, mean over recordings and channels, that is not the recordings'
         own white noise (`sensor_noise`): the closed-loop response to the noise and our discretisation error,
         fixed signals in a recording that a model may partly fit (0..1)."""
-        shares = [1.0 - (s[c] / n[c]) ** 2 for s, n in zip(self.sensor_noise, self.noise) for c in n if n[c] > 0 and c in s]
+        shares = [1.0 - (s[c] / n[c]) ** 2 for s, n in zip(self.sensor_noise, self.noise)
+                  for c in n if n[c] > 0 and c in s]
         return float(np.clip(np.mean(shares), 0.0, 1.0)) if shares else 0.0
 
 

@@ -40,7 +40,8 @@ def _variant(data: Data, i: int, scale: float | None, stretch: float) -> dict:
             if signal.get("kind") == "samples" and signal["channel"] in drive:
                 v = np.asarray(signal["values"], float)
                 v0 = v[np.isfinite(v)][0] if np.isfinite(v).any() else 0.0
-                signal["values"] = (v0 + (scale * (v - v0) if scale is not None else _sweep(signal["time_s"], v, v0, scenario))).tolist()
+                moved = scale * (v - v0) if scale is not None else _sweep(signal["time_s"], v, v0, scenario)
+                signal["values"] = (v0 + moved).tolist()
                 signal["time_s"] = (np.asarray(signal["time_s"]) * stretch).tolist()
     scenario["duration_s"] = float(scenario["duration_s"]) * stretch
     return scenario

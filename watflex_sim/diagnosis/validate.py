@@ -81,10 +81,10 @@ def rival(result: dict, chosen: dict, later: bool, absorbable: float = 1.0) -> b
     chosen one did and whose squared ratio exceeds the chosen one's by no more than the floor's `absorbable`
     share (Data.absorbable: what is not the recordings' white noise, which a wrong explanation can fit in part).
     Seed 70's watflex-76acf3b0, a 0.189 kg tip payload: an elbow torque gain x0.978 fitted validation to 0.738 x
-    the noise and the payload to 0.806 x (9 % worse, not listed with the relative margin alone; 0.10 in squares,
-    the share ~0.6); the true payload itself, simulated after the same refit, 0.790 x. Seed 71's laser_arm-6b5ba9f1
+    the noise and the payload to 0.806 x (9 % worse, not listed with the relative margin alone; 0.105 in squares,
+    the share 0.283); the true payload itself, simulated after the same refit, 0.790 x. Seed 71's laser_arm-6b5ba9f1
     with its proposed sweep run: the true beam x0.33 at 0.800 x, a hub compliance at 0.941 x (0.25 in squares, the
-    laser's share ~0.01, its noise mostly the sensors' own): told apart, no longer an alternative."""
+    share 0.013, the laser's floor mostly the sensors' own noise): told apart, no longer an alternative."""
     ratio, best = result["held_out"]["noise_ratio"], chosen["held_out"]["noise_ratio"]
     return ratio <= (1 + ALTERNATIVE_MARGIN) * best or (
         ratio <= 1.0 and best <= 1.0 and ratio**2 - best**2 <= absorbable and earns_place(result, later))
