@@ -725,15 +725,15 @@ def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative
                      scores(train_before), scores(held_before))
 
     gain, payload = fitted(4.6, 4.603, 0.71, 0.7381), fitted(4.6, 4.603, 0.77, 0.8063)
-    assert rival(payload, gain, later=False) and rival(payload, gain, later=False, absorbable=0.283)
+    assert rival(payload, gain, later=False, absorbable=1.0) and rival(payload, gain, later=False, absorbable=0.283)
     assert not rival(payload, gain, later=False, absorbable=0.013)  # 0.806^2 - 0.738^2 = 0.105
     beam, hub = fitted(8.65, 8.02, 0.80, 0.8001), fitted(8.65, 8.02, 0.89, 0.9409)
-    assert rival(hub, beam, later=False) and not rival(hub, beam, later=False, absorbable=0.013)
+    assert rival(hub, beam, later=False, absorbable=1.0) and not rival(hub, beam, later=False, absorbable=0.013)
     dwell = fitted(0.92, 0.919, 0.72, 0.7309, 2)
-    assert not rival(fitted(0.92, 0.919, 0.92 * (1 - 0.0489), 0.879, 4), dwell, later=False)
-    assert rival(fitted(1.0, 0.895, 1.0, 0.8945, 4), fitted(1.0, 0.895, 0.96, 0.8947), later=False)
-    assert not rival(fitted(4.6, 4.603, 1.02, 1.05), fitted(4.6, 4.603, 0.97, 0.98), later=False)  # 7 % worse, above
-    assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False)  # 2.5 % worse
+    assert not rival(fitted(0.92, 0.919, 0.92 * (1 - 0.0489), 0.879, 4), dwell, later=False, absorbable=1.0)
+    assert rival(fitted(1.0, 0.895, 1.0, 0.8945, 4), fitted(1.0, 0.895, 0.96, 0.8947), later=False, absorbable=1.0)
+    assert not rival(fitted(4.6, 4.603, 1.02, 1.05), fitted(4.6, 4.603, 0.97, 0.98), later=False, absorbable=1.0)  # 7 % worse, above
+    assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False, absorbable=1.0)  # 2.5 % worse
 
 
 def test_the_absorbable_share_of_the_floor(laser_recordings):

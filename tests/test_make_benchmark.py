@@ -19,6 +19,9 @@ ROOT = Path(__file__).resolve().parent.parent
 _spec = importlib.util.spec_from_file_location("make_benchmark", ROOT / "tools" / "make_benchmark.py")
 mb = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(mb)
+_spec = importlib.util.spec_from_file_location("score_benchmark", ROOT / "tools" / "score_benchmark.py")
+sb = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(sb)
 
 EFFECTS = ["coulomb_friction", "payload", "sensor_offset"]
 ARGS = dict(seed=3, rigs=("laser_arm", "watflex"), effects=EFFECTS, per_effect=1, clean=1, duration=0.5,
@@ -262,9 +265,6 @@ def test_the_scorer_names_a_command_delay_where_the_report_does(bench):
     recordings carry, as the report names it (explain.physical_place): the laser arm's voltage_cmd,
     Watflex's shoulder_torque_cmd+elbow_torque_cmd (seed 46 scored two right delays as wrong places);
     any other place is the truth's own."""
-    spec = importlib.util.spec_from_file_location("score_benchmark", ROOT / "tools" / "score_benchmark.py")
-    sb = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sb)
     out, truth = bench
     case = next(c for c in truth["cases"] if c["rig"] == "laser_arm" and c["effect"])
     recs = [read_recording(out / p) for p in case["recordings"]]
@@ -283,10 +283,6 @@ def test_the_scorer_records_a_proposed_experiment_as_the_rig_recorded_the_case(b
     from watflex_sim.diagnosis.data import measured_noise
     from watflex_sim.resim import scenario_from_recording
 
-    spec = importlib.util.spec_from_file_location("score_benchmark", ROOT / "tools" / "score_benchmark.py")
-    sb = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(sb)
-    sys.path.insert(0, str(ROOT / "tools"))
     out, truth = bench
     case = next(c for c in truth["cases"] if c["rig"] == "laser_arm" and c["effect"])
     scenario = scenario_from_recording(read_recording(out / case["recordings"][0]))

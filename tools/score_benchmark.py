@@ -42,7 +42,8 @@ from pathlib import Path
 REFERENCE_STEP_US = 3.0  # µs: bare mj_step of the laser arm at rest on the machine the times in docs/diagnosis.md and
 # docs/speed.md were measured on until 2026-11-26 (docs/speed.md: 2.99-3.07 µs); times per case are also given scaled to it
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository: watflex_sim
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tools: make_benchmark's recorder, imported by rig_records
 
 from watflex_sim import SimulationError  # noqa: E402
 from watflex_sim.diagnosis import diagnose  # noqa: E402
@@ -273,7 +274,6 @@ def main(argv: list[str] | None = None) -> int:
     if not cases:
         print(f"error: no case matches {args.cases!r} in {truth_path}", file=sys.stderr)
         return 2
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     cases.sort(key=lambda c: c["id"].rsplit("-", 1)[-1])  # by the opaque hash: rigs and kinds interleaved,
     # so a run stopped early has scored a fair sample (score.json is rewritten after every case)
     rows = []

@@ -40,19 +40,20 @@ def _variant(data: Data, i: int, scale: float | None, stretch: float) -> dict:
             if signal.get("kind") == "samples" and signal["channel"] in drive:
                 v = np.asarray(signal["values"], float)
                 v0 = v[np.isfinite(v)][0] if np.isfinite(v).any() else 0.0
-                moved = scale * (v - v0) if scale is not None else _sweep(signal["time_s"], v, v0, scenario)
+                moved = (scale * (v - v0) if scale is not None
+                         else _sweep(signal["time_s"], v, v0, float(scenario["control_period_s"])))
                 signal["values"] = (v0 + moved).tolist()
                 signal["time_s"] = (np.asarray(signal["time_s"]) * stretch).tolist()
     scenario["duration_s"] = float(scenario["duration_s"]) * stretch
     return scenario
 
 
-def _sweep(time_s: list, values: np.ndarray, start: float, scenario: dict) -> np.ndarray:
+def _sweep(time_s: list, values: np.ndarray, start: float, control_period_s: float) -> np.ndarray:
     """A logarithmic sine chirp (starting at 0) with the largest excursion of `values` from `start` as its
-    amplitude (their unit), from SWEEP_CYCLES over the recording to SWEEP_TOP of the control rate."""
+    amplitude (their unit), from SWEEP_CYCLES over the recording to SWEEP_TOP of the control rate (1/control_period_s)."""
     t = np.asarray(time_s, float) - time_s[0]
     span = float(t[-1]) if t.size > 1 and t[-1] > 0 else 1.0
-    low, high = SWEEP_CYCLES / span, SWEEP_TOP / float(scenario["control_period_s"])
+    low, high = SWEEP_CYCLES / span, SWEEP_TOP / control_period_s
     excursion = float(np.nanmax(np.abs(values - start))) if np.isfinite(values).any() else 0.0
     return excursion * chirp(t, low, span, max(high, 2.0 * low), method="logarithmic", phi=-90.0)  # from 0, no jump
 

@@ -74,7 +74,7 @@ def earns_place(result: dict, later: bool) -> bool:
     return not shortfall(result, later)
 
 
-def rival(result: dict, chosen: dict, later: bool, absorbable: float = 1.0) -> bool:
+def rival(result: dict, chosen: dict, later: bool, absorbable: float) -> bool:
     """Whether a fitted candidate is an alternative to the chosen one (both scored by `gains`): its validation
     noise ratio within ALTERNATIVE_MARGIN of the chosen one's, or, both within the noise (ratio <= 1, the floor
     that already holds our discretisation error and the closed-loop noise), one that earns its place as the
