@@ -279,7 +279,8 @@ def test_the_scorer_records_a_proposed_experiment_as_the_rig_recorded_the_case(b
     """score_benchmark.rig_records(): the experiment a report proposes, run on the case's truth, is recorded as
     the case's own files were: with the rig's noise (the tip sensor's second-difference noise within 30 % of the
     datasheet's 0.01 m: a noise-free file was the one the diagnosis could not match to its noise), the same
-    bytes each time, and by the benchmark's recorder (30 segments at half the step differ from ours)."""
+    bytes each time, and by the benchmark's recorder (30 segments at half the step differ from ours). A pair case's
+    second effect is the rig's too (a 20 ms command delay changes the file; at 0 s, the neutral value, it does not)."""
     from watflex_sim.diagnosis.data import measured_noise
     from watflex_sim.resim import scenario_from_recording
 
@@ -292,6 +293,11 @@ def test_the_scorer_records_a_proposed_experiment_as_the_rig_recorded_the_case(b
     noise = load_rig("laser_arm").channels["tip_sensor"]["noise"]
     assert measured_noise(ours) == pytest.approx(noise, rel=0.3)
     assert np.array_equal(ours, again) and not np.array_equal(ours, theirs)
+
+    def paired(seconds):
+        other = {"effect": "delay", "where": "command", "parameters": {"seconds": seconds}}
+        return sb.rig_records({**case, "kind": "pair", "others": [other]}, scenario).channels["tip_sensor"]
+    assert np.array_equal(paired(0.0), ours) and not np.array_equal(paired(0.02), ours)
 
 
 def test_the_two_joint_setup_moves_both_joints_and_places_effects_on_the_shoulder(tmp_path):

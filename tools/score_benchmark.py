@@ -116,8 +116,8 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool, recorder: 
     errors = [e for e in errors if e is not None]
     row["error"] = statistics.mean(errors) if errors else None
     proposal = report.get("proposed_experiment") or {}
-    if proposal.get("scenario_dict") and kind in ("effect", "out_of_tolerance"):  # one true effect, simulated
-        row["resolved"] = resolves(case, recordings, names, proposal["scenario_dict"], truth_effect, workers, recorder)
+    if proposal.get("scenario_dict") and kind in ("effect", "out_of_tolerance", "pair"):  # catalogue truths, simulated
+        row["resolved"] = resolves(case, recordings, names, proposal["scenario_dict"], workers, recorder)
     if baselines:
         from baselines import refit_only, sindy_residual
 
@@ -132,21 +132,22 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool, recorder: 
     return row
 
 
-def resolves(case: dict, recordings: list, names: list[str], scenario: dict, truth_effect: str, workers: int,
+def resolves(case: dict, recordings: list, names: list[str], scenario: dict, workers: int,
              recorder: dict | None = None) -> bool:
     """Run the proposed experiment on the "rig" (rig_records), diagnose again with it added, and say whether
-    the ambiguity is gone: the true effect named first and no alternative left to it."""
+    the ambiguity is gone: a true effect named first, every true effect found (a pair case has two) and no
+    alternative left."""
     try:
         extra = rig_records(case, scenario, recorder)
     except SimulationError:
         return False
     again = diagnose(recordings + [extra], names + ["discriminate.csv"], workers=workers, propose=False)
-    first = again["findings"][0]["effect"] if again["findings"] else NONE
-    return first == truth_effect and not again["alternatives"]
+    found, true = [f["effect"] for f in again["findings"]], {t["effect"] for t in [case, *case.get("others", [])]}
+    return bool(found) and found[0] in true and true <= set(found) and not again["alternatives"]
 
 
 def rig_records(case: dict, scenario: dict, recorder: dict | None = None):
-    """The Recording of `scenario` on the case's "rig": its truth (effect, parameter errors, dropped channels),
+    """The Recording of `scenario` on the case's "rig": its truth (effects, parameter errors, dropped channels),
     recorded as make_benchmark recorded the case: noise on, a seed of its own (from the case's id), and
     truth.json's `recorder`. (Run noise-free on our own discretisation, as until 2026-12-01, the new recording was
     the one file the refit rig could not match to its noise: seed 71's laser_arm-31e8e2c7 came out `unexplained`,
@@ -154,7 +155,7 @@ def rig_records(case: dict, scenario: dict, recorder: dict | None = None):
     from make_benchmark import recorder_of, simulate_case
 
     drop = ("elbow_angle",) if case.get("concealment") == "indirect channel" else ()
-    effects = [dict(effect=case["effect"], where=case["where"], **case["parameters"])]
+    effects = [dict(effect=t["effect"], where=t["where"], **t["parameters"]) for t in [case, *case.get("others", [])]]
     recorded = dict(scenario, noise=True, seed=zlib.crc32(f"{case['id']}/discriminate".encode()),
                     **recorder_of(case["rig"], **(recorder or {})))
     (_, extra), = simulate_case([("discriminate", recorded)], effects, case["refit_parameters"], drop)
