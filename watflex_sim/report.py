@@ -117,7 +117,9 @@ def _write_report(report: dict, sims: dict, recordings: list[Recording], stage: 
 
         scenario = proposal.pop("scenario_dict")
         comment = (f"Proposed by `watflex-sim diagnose`: the experiment that best separates {', '.join(proposal['separates'])}.\n"
-                   f"Predicted difference: {proposal['expected_difference']}.\nRun it on the rig (the reference below), "
+                   f"Predicted difference: {proposal['expected_difference']}.\n"
+                   + (f"Predicted drive: {proposal['drive']}.\n" if proposal.get("drive") else "")
+                   + "Run it on the rig (the reference below), "
                    "or simulate it: watflex-sim run THIS_FILE --out DIR")
         _atomic_write(directory / "discriminate.toml", to_toml(scenario, comment))
         proposal["scenario"] = str(directory / "discriminate.toml")
@@ -159,7 +161,7 @@ def summary(report: dict) -> str:
     proposal = report.get("proposed_experiment")
     if proposal and proposal.get("scenario"):
         lines.append(f"experiment that would decide: {proposal['experiment']} ({proposal['expected_difference']}); "
-                     f"scenario {proposal['scenario']}")
+                     f"scenario {proposal['scenario']}" + (f"; predicted drive: {proposal['drive']}" if proposal.get("drive") else ""))
     if report["verdict"] == "unexplained":
         for w in report["residual"]["where"][:3]:
             lines.append(f"  residual left: {w['channel']} in {w['recording']} {w['t_start']:.2f}-{w['t_end']:.2f} s "

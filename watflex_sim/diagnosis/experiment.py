@@ -6,7 +6,8 @@ experiment with its reference (or, open loop, its command) scaled x0.3 and x2 ab
 slowed to a third of its speed, and replaced by a sweep (a logarithmic chirp as far from the start as the
 recorded signal went, from SWEEP_CYCLES cycles over the recording up to SWEEP_TOP of the control rate).
 `propose_experiment` returns the proposal for the report, with the
-scenario as a dict; `to_toml` writes it as a scenario file (`watflex-sim run FILE` runs it).
+scenario as a dict and how hard it drives the rig (`drive`: each command's peak and time at its limit, as predicted
+under the chosen explanation: look before running it on a real rig); `to_toml` writes it as a scenario file (`watflex-sim run FILE` runs it).
 """
 from __future__ import annotations
 
@@ -101,10 +102,10 @@ def propose_experiment(data: Data, chosen: Model, alternatives: list[dict], runn
         i = next(j for j in range(len(data.recordings)) if label.startswith(data.names[j]))
         diffs = [_difference(preds[0], p, data.noise[i]) for p in preds[1:]]
         if min(diffs) > best_score:
-            best, best_score, best_diffs = (label, scenario), min(diffs), diffs
+            best, best_score, best_diffs = (label, scenario, preds[0]), min(diffs), diffs
     if best is None:
         return {"scenario": None, "separates": [], "expected_difference": "every menu experiment diverged under some explanation"}
-    label, scenario = best
+    label, scenario, predicted = best
     names = [f"{alternatives[0]['instead_of']}"] + [f"{a['effect']} at {a['where']}" for a in alternatives]
     weak = "" if best_score >= 1.0 else (
         "; no experiment on the menu separates them by the noise: run it several times (the noise of their mean falls "
@@ -114,8 +115,24 @@ def propose_experiment(data: Data, chosen: Model, alternatives: list[dict], runn
         "expected_difference": ", ".join(f"{n}: {d:.1f} x the noise" for n, d in zip(names[1:], best_diffs))
         + f" (RMS over the channels recorded, against {names[0]}); the recorded experiments themselves separate them by "
         "less than the noise" + weak,
+        "drive": drive_demand(predicted, data.rig.channels),
         "scenario_dict": scenario,
     }
+
+
+def drive_demand(prediction: dict, channels: dict) -> str:
+    """How hard a predicted run drives the rig, in words: each recorded command channel's peak against its limit
+    (its unit) and the share of the run spent at the limit; "" if no command channel has a limit."""
+    parts = []
+    for c, spec in channels.items():
+        if spec.get("kind") == "command" and spec.get("limit") and c in prediction:
+            v = np.abs(np.asarray(prediction[c], float))
+            v = v[np.isfinite(v)]
+            if v.size:
+                at = 100.0 * float(np.mean(v >= 0.999 * spec["limit"]))
+                parts.append(f"{c} peaks at {v.max():.3g} {spec.get('unit', '')} of its {spec['limit']:.3g} limit, "
+                             f"at the limit {at:.0f} % of the run")
+    return "; ".join(parts)
 
 
 def _toml_value(v) -> str:
