@@ -272,7 +272,7 @@ def test_proposed_experiment_separates_two_explanations_and_runs(laser_recording
     proposal = propose_experiment(data, chosen, [other])
     assert proposal["scenario_dict"] is not None and proposal["experiment"].split()[0] in ("a", "b")
     assert float(proposal["expected_difference"].split(": ")[1].split(" x")[0]) > 1.0
-    assert proposal["drive"].startswith("voltage_cmd peaks at ") and "of its 24 limit" in proposal["drive"]
+    assert proposal["drive"].startswith("voltage_cmd peaks at ") and "of its 24 V limit" in proposal["drive"]
     path = tmp_path / "discriminate.toml"
     path.write_text(to_toml(proposal["scenario_dict"], "proposed"))
     assert main(["run", str(path), "--out", str(tmp_path / "run"), "--no-plot", "--no-rrd"]) == 0
@@ -287,7 +287,7 @@ def test_a_proposal_says_how_hard_it_drives_the_rig():
 
     channels = load_rig("laser_arm").channels
     text = drive_demand({"voltage_cmd": [0.0, 12.0, 24.0, -24.0, 6.0], "tip_sensor": [1.0] * 5}, channels)
-    assert text == "voltage_cmd peaks at 24 V of its 24 limit, at the limit 40 % of the run"
+    assert text == "voltage_cmd peaks at 24 V of its 24 V limit, at the limit 40 % of the run"
     assert drive_demand({"tip_sensor": [1.0] * 5}, channels) == ""
 
 

@@ -6,8 +6,9 @@ experiment with its reference (or, open loop, its command) scaled x0.3 and x2 ab
 slowed to a third of its speed, and replaced by a sweep (a logarithmic chirp as far from the start as the
 recorded signal went, from SWEEP_CYCLES cycles over the recording up to SWEEP_TOP of the control rate).
 `propose_experiment` returns the proposal for the report, with the
-scenario as a dict and how hard it drives the rig (`drive`: each command's peak and time at its limit, as predicted
-under the chosen explanation: look before running it on a real rig); `to_toml` writes it as a scenario file (`watflex-sim run FILE` runs it).
+scenario as a dict and how hard it drives the rig (`drive`: each command's peak and time at its limit, as
+predicted under the chosen explanation: look before running it on a real rig); `to_toml` writes it as a scenario
+file (`watflex-sim run FILE` runs it).
 """
 from __future__ import annotations
 
@@ -130,7 +131,7 @@ def drive_demand(prediction: dict, channels: dict) -> str:
             v = v[np.isfinite(v)]
             if v.size:
                 at = 100.0 * float(np.mean(v >= 0.999 * spec["limit"]))
-                parts.append(f"{c} peaks at {v.max():.3g} {spec.get('unit', '')} of its {spec['limit']:.3g} limit, "
+                parts.append(f"{c} peaks at {v.max():.3g} {spec.get('unit', '')} of its {spec['limit']:.3g} {spec.get('unit', '')} limit, "
                              f"at the limit {at:.0f} % of the run")
     return "; ".join(parts)
 
