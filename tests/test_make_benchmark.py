@@ -321,3 +321,31 @@ def test_the_two_joint_setup_moves_both_joints_and_places_effects_on_the_shoulde
     rest = read_recording(tmp_path / next(p for p in cases["clean_rest"]["recordings"] if "at_rest" in p))
     assert np.ptp(rest.channels["shoulder_angle"]) < 0.01 and np.ptp(rest.channels["elbow_angle"]) < 0.01
     assert mb._key("watflex", "two_joint", "clean/0") != mb._key("watflex", "single_link", "clean/0") == "watflex/clean/0"
+
+
+def test_the_scorer_resumes_a_run_stopped_early(bench, tmp_path, monkeypatch):
+    """score_benchmark --resume: the cases already in score.json keep their rows and are not diagnosed again;
+    the others are scored and added (one row per case at the end)."""
+    import shutil
+
+    out, truth = bench
+    copy = tmp_path / "bench"
+    copy.mkdir()
+    shutil.copy(out / "truth.json", copy / "truth.json")
+    ids = sorted((c["id"] for c in truth["cases"]), key=lambda i: i.rsplit("-", 1)[-1])
+    scored = []
+
+    def row(root, case, *args):
+        scored.append(case["id"])
+        return {"id": case["id"], "rig": case["rig"], "kind": "clean", "truth": "none", "where": None, "concealment": "",
+                "verdict": "nothing_missing", "proposed": False, "covered": [], "ours": "none", "ours_where": None,
+                "ours_all": [], "held_before": 1.0, "held_after": 1.0, "seconds": 1.0, "error": None, "truth_all": None}
+
+    monkeypatch.setattr(sb, "score_case", row)
+    monkeypatch.setattr(sb, "machine_step_us", lambda: 3.0)
+    (copy / "score.json").write_text(json.dumps([{**row(copy, {"id": ids[0], "rig": "x"}), "seconds": 7.0}]))
+    scored.clear()
+    assert sb.main([str(copy), "--resume", "--no-baselines"]) == 0
+    rows = json.loads((copy / "score.json").read_text())
+    assert scored == ids[1:] and [r["id"] for r in rows] == ids and rows[0]["seconds"] == 7.0
+

@@ -1,6 +1,6 @@
 """Score the diagnosis on a benchmark made by tools/make_benchmark.py, beside two baselines.
 
-    python tools/score_benchmark.py BENCH_DIR [--cases PATTERN] [--no-baselines] [--workers 2]
+    python tools/score_benchmark.py BENCH_DIR [--cases PATTERN] [--no-baselines] [--workers 2] [--resume]
 
 For every case it runs `watflex_sim.diagnosis.diagnose` on the case's recordings only (the truth
 in BENCH_DIR/truth.json is read afterwards, to score), then baseline (a) refit-only and
@@ -254,6 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", default="*", help="only case ids matching this glob, e.g. 'laser_arm-*'")
     parser.add_argument("--no-baselines", action="store_true", help="skip refit-only and SINDy")
     parser.add_argument("--workers", type=int, default=2, help="processes per diagnosis (default 2)")
+    parser.add_argument("--resume", action="store_true",
+                        help="keep the cases already scored in BENCH_DIR/score.json (a run stopped early) and score the rest")
     parser.add_argument("--summarise", action="store_true",
                         help="only print the tables of the cases already scored (BENCH_DIR/score.json, e.g. of a run stopped early)")
     args = parser.parse_args(argv)
@@ -278,6 +280,15 @@ def main(argv: list[str] | None = None) -> int:
     cases.sort(key=lambda c: c["id"].rsplit("-", 1)[-1])  # by the opaque hash: rigs and kinds interleaved,
     # so a run stopped early has scored a fair sample (score.json is rewritten after every case)
     rows = []
+    if args.resume and (args.bench / "score.json").exists():
+        try:
+            rows = json.loads((args.bench / "score.json").read_text())
+        except ValueError as exc:
+            print(f"error: cannot resume from {args.bench / 'score.json'}: {exc}", file=sys.stderr)
+            return 2
+        done = {r["id"] for r in rows}
+        cases = [c for c in cases if c["id"] not in done]
+        print(f"resuming: {len(done)} cases already scored, {len(cases)} to go", file=sys.stderr, flush=True)
     step_us = machine_step_us()
     start = time.perf_counter()
     for i, case in enumerate(cases, 1):
