@@ -281,14 +281,14 @@ def test_proposed_experiment_separates_two_explanations_and_runs(laser_recording
 def test_a_proposal_says_how_hard_it_drives_the_rig():
     """drive_demand(): a command's peak against its limit and the share of samples at it (|v| >= 0.999 x the limit:
     2 of 5 here, 40 %), from the rig's channel table (the laser arm's voltage_cmd: 24 V, rigs.md); channels
-    without a limit say nothing."""
+    without a limit, and a command that never moves (a locked joint's), say nothing."""
     from watflex_sim.diagnosis.experiment import drive_demand
     from watflex_sim.rigdesc import load_rig
 
     channels = load_rig("laser_arm").channels
     text = drive_demand({"voltage_cmd": [0.0, 12.0, 24.0, -24.0, 6.0], "tip_sensor": [1.0] * 5}, channels)
     assert text == "voltage_cmd peaks at 24 V of its 24 V limit, at the limit 40 % of the run"
-    assert drive_demand({"tip_sensor": [1.0] * 5}, channels) == ""
+    assert drive_demand({"tip_sensor": [1.0] * 5}, channels) == drive_demand({"voltage_cmd": [0.0] * 5}, channels) == ""
 
 
 def test_the_sweep_on_the_menu_spans_the_recorded_excursion_and_band(laser_recordings):

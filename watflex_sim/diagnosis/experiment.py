@@ -123,13 +123,13 @@ def propose_experiment(data: Data, chosen: Model, alternatives: list[dict], runn
 
 def drive_demand(prediction: dict, channels: dict) -> str:
     """How hard a predicted run drives the rig, in words: each recorded command channel's peak against its limit
-    (its unit) and the share of the run spent at the limit; "" if no command channel has a limit."""
+    (its unit) and the share of the run spent at the limit; "" if no command channel with a limit moves."""
     parts = []
     for c, spec in channels.items():
         if spec.get("kind") == "command" and spec.get("limit") and c in prediction:
             v = np.abs(np.asarray(prediction[c], float))
             v = v[np.isfinite(v)]
-            if v.size:
+            if v.size and v.max() > 0:  # a command that never moves (a locked joint's) says nothing
                 at = 100.0 * float(np.mean(v >= 0.999 * spec["limit"]))
                 parts.append(f"{c} peaks at {v.max():.3g} {spec.get('unit', '')} of its {spec['limit']:.3g} {spec.get('unit', '')} limit, "
                              f"at the limit {at:.0f} % of the run")
