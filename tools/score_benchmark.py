@@ -75,6 +75,11 @@ def true_place(case: dict, recordings: list) -> str | None:
     return where
 
 
+def truths(case: dict) -> list[dict]:
+    """A case's true effects, each {"effect", "where", "parameters", ...}: one, or two for a pair case (`others`)."""
+    return [case, *case.get("others", [])]
+
+
 def score_case(root: Path, case: dict, workers: int, baselines: bool, recorder: dict | None = None) -> dict:
     """Diagnose one case (and the baselines); compare with its truth."""
     paths = [root / p for p in case["recordings"]]
@@ -102,10 +107,9 @@ def score_case(root: Path, case: dict, workers: int, baselines: bool, recorder: 
     }
     if kind == "outside_catalogue":
         row["ours"] = "unexplained" if report.get("verdict") == "unexplained" else row["ours"]
-    truths = [case] + case.get("others", [])  # a pair case has two true effects
-    row["truth_all"] = [(t["effect"], t["where"]) for t in truths] if kind == "pair" else None
+    row["truth_all"] = [(t["effect"], t["where"]) for t in truths(case)] if kind == "pair" else None
     errors = []
-    scored_truths = truths if first and truth_effect in CATALOGUE else []
+    scored_truths = truths(case) if first and truth_effect in CATALOGUE else []
     for truth in scored_truths:  # a true effect anywhere among the findings counts for the error
         match = next((f for f in report["findings"] if f["effect"] == truth["effect"]), None)
         if match:  # the truth in the form the report gives (effects.canonical: one form for the same physics)
@@ -142,7 +146,7 @@ def resolves(case: dict, recordings: list, names: list[str], scenario: dict, wor
     except SimulationError:
         return False
     again = diagnose(recordings + [extra], names + ["discriminate.csv"], workers=workers, propose=False)
-    found, true = [f["effect"] for f in again["findings"]], {t["effect"] for t in [case, *case.get("others", [])]}
+    found, true = [f["effect"] for f in again["findings"]], {t["effect"] for t in truths(case)}
     return bool(found) and found[0] in true and true <= set(found) and not again["alternatives"]
 
 
@@ -155,7 +159,7 @@ def rig_records(case: dict, scenario: dict, recorder: dict | None = None):
     from make_benchmark import recorder_of, simulate_case
 
     drop = ("elbow_angle",) if case.get("concealment") == "indirect channel" else ()
-    effects = [dict(effect=t["effect"], where=t["where"], **t["parameters"]) for t in [case, *case.get("others", [])]]
+    effects = [dict(effect=t["effect"], where=t["where"], **t["parameters"]) for t in truths(case)]
     recorded = dict(scenario, noise=True, seed=zlib.crc32(f"{case['id']}/discriminate".encode()),
                     **recorder_of(case["rig"], **(recorder or {})))
     (_, extra), = simulate_case([("discriminate", recorded)], effects, case["refit_parameters"], drop)
@@ -259,12 +263,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--summarise", action="store_true",
                         help="only print the tables of the cases already scored (BENCH_DIR/score.json, e.g. of a run stopped early)")
     args = parser.parse_args(argv)
-    if args.summarise:
+    rows = []  # the cases already scored: what --summarise prints, what --resume keeps
+    if args.summarise or (args.resume and (args.bench / "score.json").exists()):
         try:
             rows = json.loads((args.bench / "score.json").read_text())
         except (OSError, ValueError) as exc:
             print(f"error: cannot read {args.bench / 'score.json'}: {exc}", file=sys.stderr)
             return 2
+    if args.summarise:
         print(summary(rows, all("sindy" in r for r in rows) and bool(rows)))
         return 0
     truth_path = args.bench / "truth.json"
@@ -279,13 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     cases.sort(key=lambda c: c["id"].rsplit("-", 1)[-1])  # by the opaque hash: rigs and kinds interleaved,
     # so a run stopped early has scored a fair sample (score.json is rewritten after every case)
-    rows = []
-    if args.resume and (args.bench / "score.json").exists():
-        try:
-            rows = json.loads((args.bench / "score.json").read_text())
-        except ValueError as exc:
-            print(f"error: cannot resume from {args.bench / 'score.json'}: {exc}", file=sys.stderr)
-            return 2
+    if rows:
         done = {r["id"] for r in rows}
         cases = [c for c in cases if c["id"] not in done]
         print(f"resuming: {len(done)} cases already scored, {len(cases)} to go", file=sys.stderr, flush=True)

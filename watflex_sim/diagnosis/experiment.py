@@ -129,9 +129,10 @@ def drive_demand(prediction: dict, channels: dict) -> str:
         if spec.get("kind") == "command" and spec.get("limit") and c in prediction:
             v = np.abs(np.asarray(prediction[c], float))
             v = v[np.isfinite(v)]
-            if v.size and v.max() > 0:  # a command that never moves (a locked joint's) says nothing
+            peak, unit = (float(v.max()) if v.size else 0.0), spec.get("unit", "")
+            if peak > 0:  # a command that never moves (a locked joint's) says nothing
                 at = 100.0 * float(np.mean(v >= 0.999 * spec["limit"]))
-                parts.append(f"{c} peaks at {v.max():.3g} {spec.get('unit', '')} of its {spec['limit']:.3g} {spec.get('unit', '')} limit, "
+                parts.append(f"{c} peaks at {peak:.3g} {unit} of its {spec['limit']:.3g} {unit} limit, "
                              f"at the limit {at:.0f} % of the run")
     return "; ".join(parts)
 
