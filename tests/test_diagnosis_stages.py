@@ -1518,6 +1518,35 @@ def test_motion_is_the_reference_where_no_measured_joint_moves():
     assert motion_channel(Recording(t, {**channels, "elbow_angle": 0.98 * step}, {}), rig) == "elbow_angle"
 
 
+def test_where_the_moving_joints_encoder_is_not_recorded_its_motion_is_simulated():
+    """data.motions: with the elbow encoder left out the motion is the stepped elbow reference, whose robust peak
+    rate is ~0 (seed 73's watflex-349124fc: an elbow viscous friction sized by scale_of's "effort/speed" at
+    +-1e15 N m s/rad, never screened; every window "at rest"). The elbow as the nominal model moves it is used
+    instead, and it is what the encoder records: the same noise-free recording with and without the encoder gives
+    the same viscous scale (to 1e-9: one simulation; ~1 rad/s for a 0.5 rad step) and the same regime words
+    around the elbow's fastest sample."""
+    from watflex_sim.diagnosis import scale_of
+    from watflex_sim.diagnosis.data import motion_channel, motions, peak, peak_speed
+    from watflex_sim.diagnosis.locate import regimes
+    from watflex_sim.effects import CATALOGUE
+    from watflex_sim.recording import Recording
+    from watflex_sim.rigdesc import load_rig
+
+    seen = simulate(load_scenario("watflex_elbow_step", ["duration_s=1.5"])).recording
+    blind = Recording(seen.time, {c: v for c, v in seen.channels.items() if c != "elbow_angle"}, seen.meta)
+    rig = load_rig("watflex")
+    assert motion_channel(blind, rig) == "elbow_reference"
+    assert peak(np.gradient(blind.channels["elbow_reference"], blind.time)) < 1e-9  # rad/s: a step's robust rate
+    viscous = CATALOGUE["viscous_friction"][1][0]
+    with_encoder, without = prepare([seen], ["seen"]), prepare([blind], ["blind"])
+    assert scale_of(without, viscous, "elbow") == pytest.approx(scale_of(with_encoder, viscous, "elbow"), rel=1e-9)
+    assert 0.5 < peak_speed(without) < 2.0  # rad/s
+    fastest = int(np.argmax(np.abs(np.gradient(seen.channels["elbow_angle"]))))
+    window = fastest - 25, fastest + 25
+    assert regimes(blind, rig, *window, motions(without)[0]) == regimes(seen, rig, *window) == "positive motion"
+    assert regimes(blind, rig, *window).startswith("near zero velocity")  # the reference alone
+
+
 def _local_case(misfit: float, discretisation: float = 0.0, seed: int = 7):
     """A 6 s strain channel at 1 kHz, white sensor noise 0.01 V (its whole-recording noise), measured = the model + a
     bump of `misfit` x the noise over 0.1 s at 2 s (a misfit at one transient), the model's discretisation changing

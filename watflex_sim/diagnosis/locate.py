@@ -14,7 +14,7 @@ import numpy as np
 
 from ..recording import Recording
 from ..rigdesc import RigDescription
-from .data import Data, motion_channel
+from .data import Data, motion_channel, motions
 
 WINDOW_S = 0.05  # s, moving-RMS window of the residual
 LOCAL_WINDOW_S = 0.1  # s, window of the local test (local_excess)
@@ -22,12 +22,14 @@ LOCAL_MARGIN = 4.0  # a window this far above its local null is a misfit, whatev
 DISCRETISATION_COUNT = 2.0  # the local null counts the discretisation change this many times (see local_null)
 
 
-def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int) -> str:
-    """Words for what the rig was doing in samples i0..i1: direction, rest, reversal, saturation."""
+def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int, motion: tuple[str, np.ndarray] | None = None) -> str:
+    """Words for what the rig was doing in samples i0..i1: direction, rest, reversal, saturation. `motion`: what
+    moves (data.motions: its name and positions), else the recording's motion_channel."""
     words = []
-    motion = motion_channel(rec, rig)
+    if motion is None and (name := motion_channel(rec, rig)):
+        motion = name, rec.channels[name]
     if motion:
-        q = rec.channels[motion]
+        motion, q = motion
         dt = float(np.median(np.diff(rec.time)))
         velocity = np.gradient(q, dt)
         v = velocity[i0:i1]
@@ -63,8 +65,8 @@ def dominant_frequency(r: np.ndarray, dt: float) -> float:
 def locate(data: Data, sims: list[Recording], top: int = 8) -> list[dict]:
     """Windows where the residual stands out of the noise, largest first (see the module docstring)."""
     found = []
-    for rec, sim, name, chans, scale, noise in zip(data.recordings, sims, data.names, data.channels,
-                                                   data.scale, data.noise):
+    for rec, sim, name, chans, scale, noise, moves in zip(data.recordings, sims, data.names, data.channels,
+                                                          data.scale, data.noise, motions(data)):
         dt = float(np.median(np.diff(rec.time)))
         width = max(3, int(WINDOW_S / dt))
         for c in chans:
@@ -78,7 +80,7 @@ def locate(data: Data, sims: list[Recording], top: int = 8) -> list[dict]:
                 if i1 - i0 < width:
                     continue
                 found.append({"recording": name, "channel": c, "t_start": float(rec.time[i0]),
-                              "t_end": float(rec.time[i1 - 1]), "regime": regimes(rec, data.rig, i0, i1),
+                              "t_end": float(rec.time[i1 - 1]), "regime": regimes(rec, data.rig, i0, i1, moves),
                               "score": float(np.sqrt(np.mean(r[i0:i1] ** 2))),
                               "noise_ratio": float(np.sqrt(np.mean(raw[i0:i1] ** 2))) / noise[c],
                               "frequency_hz": dominant_frequency(raw[i0:i1], dt)})
@@ -130,7 +132,7 @@ def local_excess(data: Data, sims: list[Recording]) -> list[dict]:
                 a, b = max(0, j - width // 2), min(rec.time.size, j + width // 2 + 1)
                 found.append({"recording": name, "index": i, "channel": c, "first": int(a), "last": int(b),
                               "t_start": float(rec.time[a]), "t_end": float(rec.time[b - 1]),
-                              "regime": regimes(rec, data.rig, a, b), "ratio": float(ratio[j])})
+                              "regime": regimes(rec, data.rig, a, b, motions(data)[i]), "ratio": float(ratio[j])})
     found.sort(key=lambda w: -w["ratio"])
     return found
 
