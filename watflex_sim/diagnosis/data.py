@@ -61,9 +61,9 @@ class Data:
     # the recording shows (declared or measured, its unit): `noise` before the closed-loop and discretisation parts
     closed_loop_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what the
     # rig's noise leaves in closed loop, squared, per sample (its unit^2; add_closed_loop_noise)
-    motion_memo: list | None = None  # `motions`' answer, once asked
     discretisation_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what a
     # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
+    motion_memo: list | None = None  # `motions`' answer, once asked
 
     @property
     def noise_floor(self) -> list[dict[str, float]]:
@@ -344,14 +344,16 @@ def motion_channel(rec: Recording, rig: RigDescription) -> str | None:
     """The joint position (rad or m) that moves most in the recording: what 'motion' means. A measured one,
     unless none moves a tenth as far as a reference does (a locked joint's encoder, the moving joint's left
     out: a rig seen through its strains only); then the reference."""
-    def spread(kind: str) -> dict[str, float]:
-        return {c: float(np.nanstd(rec.channels[c])) for c in rig.of_kind(kind) if c in rec.channels
-                and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")
-                and np.isfinite(rec.channels[c]).any()}
-    measured, reference = spread("measured"), spread("reference")
+    measured, reference = _position_spreads(rec, rig, "measured"), _position_spreads(rec, rig, "reference")
     if reference and max(reference.values()) > 10 * max(measured.values(), default=0.0):
         return max(reference, key=reference.get)
     return max(measured, key=measured.get, default=None)
+
+
+def _position_spreads(rec: Recording, rig: RigDescription, kind: str) -> dict[str, float]:
+    """The spread (std, rad or m) of each joint position of `kind` ("measured", "reference") the recording has."""
+    return {c: float(np.nanstd(rec.channels[c])) for c in rig.of_kind(kind) if c in rec.channels
+            and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_") and np.isfinite(rec.channels[c]).any()}
 
 
 def scale_of(data: Data, param, where: str) -> float:
@@ -410,8 +412,7 @@ def _simulated_motion(rec: Recording, rig: RigDescription) -> tuple[str, np.ndar
         sim = simulate(scenario_from_recording(rec, rig), rig=rig).recording
     except (ConfigError, SimulationError):
         return None
-    spread = {c: float(np.nanstd(sim.channels[c])) for c in rig.of_kind("measured") if c in sim.channels
-              and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_")}
+    spread = _position_spreads(sim, rig, "measured")
     if not spread:
         return None
     name = max(spread, key=spread.get)

@@ -26,17 +26,17 @@ def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int, motion: tuple
     """Words for what the rig was doing in samples i0..i1: direction, rest, reversal, saturation. `motion`: what
     moves (data.motions: its name and positions), else the recording's motion_channel."""
     words = []
-    if motion is None and (name := motion_channel(rec, rig)):
-        motion = name, rec.channels[name]
+    if motion is None and (channel := motion_channel(rec, rig)):
+        motion = channel, rec.channels[channel]
     if motion:
-        motion, q = motion
+        what, q = motion
         dt = float(np.median(np.diff(rec.time)))
         velocity = np.gradient(q, dt)
         v = velocity[i0:i1]
         span = float(np.nanmax(np.abs(velocity))) or 1.0
         moving = np.abs(v) > 0.05 * span
         if moving.mean() < 0.2:
-            words.append(f"near zero velocity ({motion} at rest)")
+            words.append(f"near zero velocity ({what} at rest)")
         else:
             up, down = (v > 0.05 * span).mean(), (v < -0.05 * span).mean()
             if up > 0.1 and down > 0.1:
@@ -120,7 +120,7 @@ def local_excess(data: Data, sims: list[Recording]) -> list[dict]:
     two dwell-time stictions called `nothing_missing` (0.92-1.0 x the noise on the whole) 5.6 x and 6.3 x after the
     dwell, a laser motor current outside the catalogue (1.14 x on the whole, called `nothing_missing`) 4.9 x."""
     found = []
-    for i, (rec, sim, name, chans) in enumerate(zip(data.recordings, sims, data.names, data.channels)):
+    for i, (rec, sim, name, chans, moves) in enumerate(zip(data.recordings, sims, data.names, data.channels, motions(data))):
         width = _local_width(rec)
         for c in chans:
             r = np.nan_to_num(rec.channels[c] - sim.channels[c])
@@ -132,7 +132,7 @@ def local_excess(data: Data, sims: list[Recording]) -> list[dict]:
                 a, b = max(0, j - width // 2), min(rec.time.size, j + width // 2 + 1)
                 found.append({"recording": name, "index": i, "channel": c, "first": int(a), "last": int(b),
                               "t_start": float(rec.time[a]), "t_end": float(rec.time[b - 1]),
-                              "regime": regimes(rec, data.rig, a, b, motions(data)[i]), "ratio": float(ratio[j])})
+                              "regime": regimes(rec, data.rig, a, b, moves), "ratio": float(ratio[j])})
     found.sort(key=lambda w: -w["ratio"])
     return found
 
