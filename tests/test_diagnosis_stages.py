@@ -1678,6 +1678,41 @@ def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_
             assert runner.fidelity == 1.0 and sims is ours and error > COARSE_MARGIN, error
 
 
+def test_a_round_whose_candidate_does_not_stand_the_coarse_model_is_fitted_as_fine(monkeypatch):
+    """refit.fine_for_round: on the laser arm simulated half as fine (choose_fidelity), a round whose fitted candidates
+    are all smooth (a tip payload) stays coarse and untouched; one with a candidate that the coarse model misjudges
+    (the demo's gear stick-slip, beyond COARSE_MARGIN x the noise from its own, as in keep_fidelity's test) goes to
+    the model's own fidelity before the round chooses: every candidate carried on there (refine.carry_on, stubbed
+    here) and the current model's simulations returned as fine, so the candidates' gains are against like."""
+    from watflex_sim.diagnosis import refit
+    from watflex_sim.diagnosis.effect_fit import scored
+    from watflex_sim.diagnosis.runner import Runner
+    from watflex_sim.diagnosis.screening import SCREEN_FINER
+
+    carried = []
+    monkeypatch.setattr(refit, "carry_on", lambda data, runner, result: carried.append(result) or {**result, "carried": True})
+    steps = [simulate(load_scenario("laser_arm_step", [f"direction={d}", "duration_s=2.0", f"seed={i}"])).recording
+             for i, d in enumerate(("positive", "negative"))]
+    data = prepare(steps, ["a.csv", "b.csv"])
+    quiet = lambda kind, message: None  # noqa: E731
+    with Runner(data, 1) as runner:
+        sims, _ = refit.choose_fidelity(data, runner, runner.simulate(Model()), quiet)
+        assert runner.fidelity == SCREEN_FINER
+        payload = Model([{"effect": "payload", "where": "tip", "mass": 0.1}])
+        smooth = [scored(data, {"model": payload, "effect": "payload", "where": "tip"}, runner.simulate(payload))]
+        assert refit.fine_for_round(data, runner, Model(), sims, smooth, quiet) == (smooth, sims)
+        assert runner.fidelity == SCREEN_FINER and not carried
+        stiction = Model([{"effect": "coulomb_friction", "where": "hub", "torque_positive": 2.778, "torque_negative": 0.926}])
+        rough = smooth + [scored(data, {"model": stiction, "effect": "coulomb_friction", "where": "hub"}, runner.simulate(stiction))]
+        said = []
+        out, now = refit.fine_for_round(data, runner, Model(), sims, rough, lambda kind, message: said.append(message))
+        assert runner.fidelity == 1.0 and "coulomb_friction at hub" in said[-1] and "from now on" in said[-1]
+        assert [r["effect"] for r in carried] == ["payload", "coulomb_friction"] and all(r["carried"] for r in out)
+        fine_stiction = runner.simulate(stiction)  # carried on from its simulations as fine, not the coarse ones
+        assert np.array_equal(carried[1]["sims"][0].channels["tip_sensor"], fine_stiction[0].channels["tip_sensor"])
+        assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(now, runner.simulate(Model())) for c in a.channels)
+
+
 def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are_in(monkeypatch):
     """swap_earlier(): seed 65, laser_arm-d6ea25d4 (hub Coulomb friction beside a voltage gain x1.132): with the
     gain missing, a Stribeck friction fitted validation best in round 1 (1.83 x the noise, Coulomb 2.19 x) and was

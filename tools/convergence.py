@@ -1,6 +1,6 @@
 """Discretisation convergence and time-step stability of the flexible-beam chains.
 
-Usage: python tools/convergence.py [--skip-stability]
+Usage: python tools/convergence.py [--skip-stability] [--skip-effects]
 
 Prints markdown tables (headless, a few tens of seconds on 2 cores):
 1. error (%) of the first three clamped-free bending frequencies and of the static tip
@@ -10,7 +10,14 @@ Prints markdown tables (headless, a few tens of seconds on 2 cores):
    (N full segments, the first hinge at the root, k = EI/dx);
 2. which physics time steps run 2 s of free vibration from a 1 cm static tip deflection
    without divergence, per integrator, for the nominal laser arm (hub free) and Watflex
-   (both joints free), nominal damping, no input.
+   (both joints free), nominal damping, no input;
+3. how the catalogue's extra-hinge effects (effects.backlash, effects.joint_compliance) converge with N: a closed-loop
+   step (laser_arm_step at the hub, watflex_elbow_step at the elbow, `--duration` s, noise off, a physics step half
+   the model's) simulated with the effect at N segments: its rms distance from the same at N = 30 in units of the
+   effect's size there (the rms change it makes at N = 30), beside the nominal model's own distance; and the rms
+   change the effect makes over the run's second half at N against that at N = 30 (its amplitude, whatever its
+   phase: a backlash keeps a closed loop hunting, whose phase drifts with any difference while its amplitude
+   converges).
 
 Reference values: watflex_sim.beam_theory (clamped_free_frequencies, tip_deflection).
 Modes come from the linearised chain: K = diag(hinge stiffness), M = mj_fullM on the chain
@@ -33,6 +40,8 @@ from watflex_sim.build import add_flexible_chain, chain_tip_x  # noqa: E402
 from watflex_sim.engine import SimulationError, _check_state, _settle_bearings, energy  # noqa: E402
 from watflex_sim.model import load_model  # noqa: E402
 from watflex_sim.params import CONTROL_PERIOD, LASER_ARM, WATFLEX  # noqa: E402
+from watflex_sim.scenario import load_scenario  # noqa: E402
+from watflex_sim.engine import simulate  # noqa: E402
 
 MIDPOINT_N = (3, 5, 7, 9, 11, 12, 15, 21)  # segments, hinges at segment midpoints
 END_HINGE_N = (5, 11, 21, 45, 90)  # segments, hinges at element ends
@@ -205,9 +214,57 @@ def _stability_rows() -> str:
     return "\n".join(rows) + "\n\n" + nominal + "\n"
 
 
+# --- the extra-hinge effects ------------------------------------------------------------------
+
+EFFECT_N = (6, 12, 60)  # segments compared with EFFECT_REFERENCE_N
+EFFECT_REFERENCE_N = 30
+EFFECT_CASES = (  # (scenario, joint, channels compared, effects)
+    ("laser_arm_step", "hub", ("tip_sensor", "motor_current"),
+     ({"effect": "backlash", "width": 7e-5}, {"effect": "backlash", "width": 3e-4},
+      {"effect": "joint_compliance", "stiffness": 5e3})),
+    ("watflex_elbow_step", "elbow", ("elbow_angle", "strain_2A"),
+     ({"effect": "backlash", "width": 7e-5}, {"effect": "backlash", "width": 4e-3},
+      {"effect": "joint_compliance", "stiffness": 5e3})),
+)
+
+
+def _step(name: str, effects: list[dict], n: int, duration: float) -> dict[str, np.ndarray]:
+    """Channels of `duration` s of the experiment `name`, noise off, n segments, half the model's physics step."""
+    scenario = load_scenario(name, ["noise=false", f"duration_s={duration}"])
+    scenario.update(effects=effects, n_segments=n, timestep=load_model(scenario["rig"]).opt.timestep / 2)
+    return simulate(scenario).recording.channels
+
+
+def effect_convergence_table(duration: float) -> str:
+    """Markdown table: per effect and channel, its size at EFFECT_REFERENCE_N, the distance at each EFFECT_N (nominal,
+    with the effect) and the second half's change at each EFFECT_N against EFFECT_REFERENCE_N's."""
+    rms = lambda a, b: float(np.sqrt(np.nanmean((np.asarray(a) - np.asarray(b)) ** 2)))  # noqa: E731
+    cols = lambda what: " | ".join(f"{what} N = {n}" for n in EFFECT_N)  # noqa: E731
+    rows = [f"| experiment ({duration:g} s) | effect | channel | size at N = 30 | {cols('nominal')} | {cols('effect')} "
+            f"| {cols('2nd half')} |", "|---|---|---|---:|" + "---:|" * (3 * len(EFFECT_N))]
+    for name, joint, channels, effects in EFFECT_CASES:
+        every = (EFFECT_REFERENCE_N, *EFFECT_N)
+        nominal = {n: _step(name, [], n, duration) for n in every}
+        for effect in effects:
+            with_it = {n: _step(name, [{**effect, "where": joint}], n, duration) for n in every}
+            for c in channels:
+                ref, size = with_it[EFFECT_REFERENCE_N][c], rms(with_it[EFFECT_REFERENCE_N][c], nominal[EFFECT_REFERENCE_N][c])
+                half = len(ref) // 2
+                late = {n: rms(with_it[n][c][half:], nominal[n][c][half:]) for n in every}
+                label = ", ".join(f"{k} {v:g}" for k, v in effect.items() if k != "effect")
+                rows.append(f"| {name} | {effect['effect']} ({label}) | {c} | {size:.3g} | "
+                            + " | ".join(f"{rms(nominal[n][c], nominal[EFFECT_REFERENCE_N][c]) / size:.3f}" for n in EFFECT_N) + " | "
+                            + " | ".join(f"{rms(with_it[n][c], ref) / size:.3f}" for n in EFFECT_N) + " | "
+                            + " | ".join(f"{late[n] / late[EFFECT_REFERENCE_N]:.3f}" for n in EFFECT_N) + " |")
+    return ("\n".join(rows) + "\n\nDistances in units of the effect's size at N = 30 (the rms change it makes there); "
+            "2nd half: the rms change the effect makes over the run's second half at N over that at N = 30.\n")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--skip-stability", action="store_true", help="only the discretisation tables (fast)")
+    parser.add_argument("--skip-stability", action="store_true", help="skip the time-step stability table")
+    parser.add_argument("--skip-effects", action="store_true", help="skip the extra-hinge effects' table (~20 s at 1.5 s)")
+    parser.add_argument("--duration", type=float, default=1.5, help="seconds of each step in the effects' table (default 1.5)")
     args = parser.parse_args()
     print("## Bending modes and static tip deflection: error (%) vs segments N\n")
     print("### Hinges at segment midpoints (our scheme, add_flexible_chain)\n")
@@ -217,6 +274,9 @@ def main() -> int:
     if not args.skip_stability:
         print("## Free vibration for 2 s from a 1 cm tip deflection, nominal damping, no input\n")
         print(stability_table())
+    if not args.skip_effects:
+        print("## The extra-hinge effects in a closed-loop step: distance from N = 30 vs segments N\n")
+        print(effect_convergence_table(args.duration))
     return 0
 
 

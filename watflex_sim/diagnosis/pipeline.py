@@ -27,7 +27,7 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
-from .refit import calibrate_noise, final_refit, keep_fidelity, refit_nominal
+from .refit import calibrate_noise, final_refit, fine_for_round, keep_fidelity, refit_nominal
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -150,9 +150,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else ""))
         results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
-        fitted = [judge(scored(data, r, r["sims"])) for r in results if "error" not in r]
+        fitted = [scored(data, r, r["sims"]) for r in results if "error" not in r]
         if not fitted:
             break
+        fitted, sims = fine_for_round(data, runner, current, sims, fitted, say)  # a candidate may not stand the coarser model
+        train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judge's baseline
+        fitted = [judge(r) for r in fitted]
         fitted.sort(key=lambda r: (-r.get("local_gain", r["score"]), r["effect"], r["where"]))
         fitted_report.append([{"effect": r["effect"], "where": r["where"], "parameters": r["n_params"],
                                "train_gain": round(r["train_gain"], 4), "held_out_gain": round(r["held_gain"], 4),
