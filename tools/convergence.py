@@ -37,11 +37,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from watflex_sim.beam_theory import clamped_free_frequencies, tip_deflection  # noqa: E402
 from watflex_sim.build import add_flexible_chain, chain_tip_x  # noqa: E402
-from watflex_sim.engine import SimulationError, _check_state, _settle_bearings, energy  # noqa: E402
+from watflex_sim.engine import SimulationError, _check_state, _settle_bearings, energy, simulate  # noqa: E402
 from watflex_sim.model import load_model  # noqa: E402
 from watflex_sim.params import CONTROL_PERIOD, LASER_ARM, WATFLEX  # noqa: E402
 from watflex_sim.scenario import load_scenario  # noqa: E402
-from watflex_sim.engine import simulate  # noqa: E402
 
 MIDPOINT_N = (3, 5, 7, 9, 11, 12, 15, 21)  # segments, hinges at segment midpoints
 END_HINGE_N = (5, 11, 21, 45, 90)  # segments, hinges at element ends
@@ -240,6 +239,7 @@ def effect_convergence_table(duration: float) -> str:
     with the effect) and the second half's change at each EFFECT_N against EFFECT_REFERENCE_N's."""
     rms = lambda a, b: float(np.sqrt(np.nanmean((np.asarray(a) - np.asarray(b)) ** 2)))  # noqa: E731
     cols = lambda what: " | ".join(f"{what} N = {n}" for n in EFFECT_N)  # noqa: E731
+    ratio = lambda a, b: f"{a / b:.3f}" if b > 0 else "-"  # noqa: E731  (- : the effect does not move the channel)
     rows = [f"| experiment ({duration:g} s) | effect | channel | size at N = 30 | {cols('nominal')} | {cols('effect')} "
             f"| {cols('2nd half')} |", "|---|---|---|---:|" + "---:|" * (3 * len(EFFECT_N))]
     for name, joint, channels, effects in EFFECT_CASES:
@@ -253,9 +253,9 @@ def effect_convergence_table(duration: float) -> str:
                 late = {n: rms(with_it[n][c][half:], nominal[n][c][half:]) for n in every}
                 label = ", ".join(f"{k} {v:g}" for k, v in effect.items() if k != "effect")
                 rows.append(f"| {name} | {effect['effect']} ({label}) | {c} | {size:.3g} | "
-                            + " | ".join(f"{rms(nominal[n][c], nominal[EFFECT_REFERENCE_N][c]) / size:.3f}" for n in EFFECT_N) + " | "
-                            + " | ".join(f"{rms(with_it[n][c], ref) / size:.3f}" for n in EFFECT_N) + " | "
-                            + " | ".join(f"{late[n] / late[EFFECT_REFERENCE_N]:.3f}" for n in EFFECT_N) + " |")
+                            + " | ".join(ratio(rms(nominal[n][c], nominal[EFFECT_REFERENCE_N][c]), size) for n in EFFECT_N) + " | "
+                            + " | ".join(ratio(rms(with_it[n][c], ref), size) for n in EFFECT_N) + " | "
+                            + " | ".join(ratio(late[n], late[EFFECT_REFERENCE_N]) for n in EFFECT_N) + " |")
     return ("\n".join(rows) + "\n\nDistances in units of the effect's size at N = 30 (the rms change it makes there); "
             "2nd half: the rms change the effect makes over the run's second half at N over that at N = 30.\n")
 
@@ -266,6 +266,8 @@ def main() -> int:
     parser.add_argument("--skip-effects", action="store_true", help="skip the extra-hinge effects' table (~20 s at 1.5 s)")
     parser.add_argument("--duration", type=float, default=1.5, help="seconds of each step in the effects' table (default 1.5)")
     args = parser.parse_args()
+    if not args.duration > 0:
+        parser.error(f"--duration must be > 0 s, got {args.duration}")
     print("## Bending modes and static tip deflection: error (%) vs segments N\n")
     print("### Hinges at segment midpoints (our scheme, add_flexible_chain)\n")
     print(convergence_table(midpoint_cantilever, MIDPOINT_N))
