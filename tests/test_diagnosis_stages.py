@@ -1599,6 +1599,25 @@ def test_a_misfit_at_one_transient_is_not_within_the_noise():
     assert local_excess(*_local_case(0.0)[:2]) == []
 
 
+def test_a_verdict_reached_at_the_effect_limit_does_not_claim_the_catalogue_was_searched():
+    """validate.verdict_reason: where the search stopped at max_effects (`limit`) the reason says so instead of "no
+    further catalogue effect earns its place", which only a round that fitted the candidates and kept none can say
+    (EMPS both runs at --max-effects 1: `unexplained` at 29.8 x the noise after one finding, its reason claimed the
+    catalogue had been tried). Scores in noise units, as fit_scores gives them."""
+    from watflex_sim.diagnosis.validate import verdict_reason
+
+    far = {"noise_ratio": 25.8, "worst_ratio": 36.3, "worst_channel": "vir"}
+    refit = {"noise_ratio": 47.8, "worst_ratio": 77.9, "worst_channel": "vir"}
+    searched = verdict_reason("unexplained", far, far, refit, refit, 0.4, [])
+    stopped = verdict_reason("unexplained", far, far, refit, refit, 0.4, [], limit=1)
+    assert "no further catalogue effect earns its place" in searched and "--max-effects" not in searched
+    assert "limit of 1 finding (--max-effects)" in stopped and "no further catalogue effect" not in stopped
+    explained = verdict_reason("explained", far, far, refit, refit, 0.85, [], limit=2)
+    assert "85 %" in explained and "limit of 2 findings" in explained and "no further catalogue effect" not in explained
+    within = {"noise_ratio": 1.0, "worst_ratio": 1.2, "worst_channel": "vir"}  # within the noise: nothing is left to search, the limit is moot
+    assert "--max-effects" not in verdict_reason("explained", within, within, refit, refit, 1.0, [], limit=2)
+
+
 def test_in_a_round_for_local_windows_a_finding_must_remove_their_excess(monkeypatch):
     """validate.shortfall with `local_gain` (a round asked for by locate.local_excess): training and validation
     cannot show a 0.1 s misfit among many channels and recordings, so a finding earns its place by removing

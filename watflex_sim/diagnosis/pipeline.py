@@ -27,7 +27,7 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
-from .refit import calibrate_noise, final_refit, fine_for_round, keep_fidelity, refit_nominal
+from .refit import calibrate_noise, final_refit, fine_for_round, keep_fidelity, refit_nominal, refit_on_training
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -89,6 +89,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     rejected, screened_report, fitted_report, alternatives, rounds = [], [], [], [], []
     round_ = 0
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
+    limited = None  # max_effects where the search stopped at it (validate.verdict_reason)
+    round_models = {}  # each round's chosen model, fitted on the training blocks, by its effects' places
     local, local_tried = [], False  # windows far above their local null (locate.local_excess) where the refit model is
     # within the noise on the whole: a round of their own; they then judge its findings to the end
 
@@ -188,7 +190,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                              "why": shortfall(best, later)})
             break
         n = len(current.effects)
-        places = lambda r: [(e["effect"], e["where"]) for e in r["model"].effects[n:]]  # noqa: E731
+        places = lambda r: _places(r["model"])[n:]  # noqa: E731
         alternatives += [alternative_entry(data, r, best, n) for r in fitted
                          if places(r) != places(best) and rival(r, best, later, data.absorbable)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
@@ -202,7 +204,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             best = carry_on(data, runner, scored(data, best, sims))
             current, sims = best["model"], best["sims"]
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
+        round_models[_places(current)] = current
         mismatch = locate(data, sims) or mismatch
+    else:  # the loop ran to the limit: whether a further effect would earn its place was never asked
+        limited = max_effects
     if len(rounds) > 1:  # an earlier round's choice, with the later findings in (refine.swap_earlier)
         say("swap", "refitting each earlier finding's runners-up in its place beside the later findings")
         now, tried = swap_earlier(data, runner, scored(data, {"model": current}, sims), rounds[:-1], PAIR_MARGIN)
@@ -239,8 +244,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                       "intervals": ranges.get(i, {}), "why": "its 95 % intervals include no effect at all"} for i in vague]
         found = len(trained.effects)
         current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
-        if current.effects:
-            sims = runner.simulate(current) or sims
+        if current.effects:  # its numbers were fitted beside the dropped: fitted again, from a round's fit of it if any
+            say("elimination", "refitting the rest on the training blocks")
+            current, new = refit_on_training(data, runner, round_models.get(_places(current), current))
+            sims = new or sims
         else:  # the rig's parameters as refit without effects, not as they were fitted beside the dropped ones
             current, sims = refit_model, refit_sims
     current, ranges = _canonical(current, ranges)
@@ -260,7 +267,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "rig": data.rig.name,
         "recordings": data.names,
         "verdict": verdict,
-        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local),
+        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local, limited),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -322,3 +329,8 @@ def _scores(data: Data, sims: list[Recording], model: Model) -> dict:
     return {"train_nrmse": train["nrmse"], "held_out_nrmse": held["nrmse"], "train_noise_ratio": train["noise_ratio"],
             "held_out_noise_ratio": held["noise_ratio"], "effects": [dict(e) for e in model.effects],
             "parameters": dict(model.parameters)}
+
+
+def _places(model: Model) -> tuple:
+    """The model's effects as (effect, place) pairs, in order: which physics it has, whatever the numbers."""
+    return tuple((e["effect"], e["where"]) for e in model.effects)

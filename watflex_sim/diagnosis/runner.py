@@ -146,9 +146,9 @@ class Runner:
         """`simulate` once per noise seed (None: noise off), all in one lockstep call; `finer` relative to the fidelity."""
         return self._simulate_each([(model, seed) for seed in seeds], finer)
 
-    def simulate_models(self, models: list[Model]) -> list[list[Recording] | None]:
-        """`simulate` for each model (noise off), all in one lockstep call."""
-        return self._simulate_each([(model, None) for model in models])
+    def simulate_models(self, models: list[Model], finer: float = 1) -> list[list[Recording] | None]:
+        """`simulate` for each model (noise off), all in one lockstep call; `finer` relative to the fidelity."""
+        return self._simulate_each([(model, None) for model in models], finer)
 
     def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: float = 1) -> list[list[Recording] | None]:
         n = len(self.data.recordings)

@@ -205,7 +205,11 @@ def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list
 
 
 def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict], local: list[dict] = ()) -> str:
+                   curved: list[dict], local: list[dict] = (), limit: int | None = None) -> str:
+    """Why the verdict, in words; `limit`: the number of findings at which the search stopped without asking whether
+    a further effect would earn its place (max_effects), None where it asked."""
+    stopped = (f"the search stopped at its limit of {limit} finding{'s' if limit != 1 else ''} (--max-effects) before "
+               "asking whether a further effect earns its place")
     worst = max((train, held), key=lambda s: s["worst_ratio"])
     now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
            f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
@@ -229,10 +233,12 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
         within = within_noise(train, held)
         return ((f"the findings bring the model within {NOISE_MARGIN:g} x the noise" if within else
                  f"the findings remove {100 * share:.0f} % of the validation residual above the noise (at least "
-                 f"{100 * EXPLAINED_SHARE:.0f} % asked); what is left no further catalogue effect explains")
+                 f"{100 * EXPLAINED_SHARE:.0f} % asked); "
+                 + ("what is left no further catalogue effect explains" if limit is None else stopped))
                 + f" ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, {refit_held['noise_ratio']:.2f} x)")
     return (f"the residual stays above {NOISE_MARGIN:g} x the noise ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, "
-            f"{refit_held['noise_ratio']:.2f} x) and no further catalogue effect earns its place: see 'residual'")
+            f"{refit_held['noise_ratio']:.2f} x) and " + ("no further catalogue effect earns its place" if limit is None else stopped)
+            + ": see 'residual'")
 
 
 def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: list[dict], held: dict) -> list[int]:
