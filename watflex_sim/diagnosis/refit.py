@@ -26,7 +26,7 @@ from .data import (Data, Model, add_closed_loop_noise, add_discretisation_error,
 from .effect_fit import scored
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
-from .refine import POLISH_ITERATIONS, carry_on
+from .refine import POLISH_ITERATIONS, carry_on, in_noise
 from .runner import Runner, evaluator, in_units
 from .screening import SCREEN_FINER
 from .uncertainty import FINER, NOISE_SEED
@@ -232,8 +232,7 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
         r_again = evaluate([again])[0]
         if r_again is not None and float(r_again @ r_again) < float(r @ r):
             refit = again
-            trained = levenberg(in_units(evaluator(runner), unit_change(data)), start, free, [value_of(start, s) for s in free],
-                                None, POLISH_ITERATIONS)[0]
+            trained = _training_fit(data, runner, start, free)
     new = runner.simulate(refit)
     return (refit, new, trained) if new is not None else (model, sims, model)
 
@@ -241,12 +240,16 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
 def refit_on_training(data: Data, runner: Runner, model: Model) -> tuple[Model, list[Recording] | None]:
     """`model`'s effects' and the rig's parameters refit on the training blocks (in noise units, as each finding was
     fitted) and its simulations: for a model left when a finding is dropped, whose numbers were fitted beside it.
-    Not refit, it was judged as it stood (EMPS estimation run: a direction-dependent viscous term dropped as vague left Coulomb friction
-    with the parameters fitted beside it, validation 6.08 x the noise where the same friction fitted alone had 4.02 x,
-    and the final refit's move from there read as the fit's scatter: 95 % intervals of +-80 %). The model as
-    given, simulated, where the refit diverges (None: that diverges too)."""
-    free = effect_slots_of(data, model) + rig_slots(data)
-    refit = levenberg(in_units(evaluator(runner), unit_change(data)), model, free, [value_of(model, s) for s in free],
-                      None, POLISH_ITERATIONS)[0]
+    Not refit, it was judged as it stood (EMPS estimation run: a direction-dependent viscous term dropped as vague
+    left Coulomb friction with the parameters fitted beside it, validation 6.08 x the noise where the same friction
+    fitted alone had 4.02 x, and the final refit's move from there read as the fit's scatter: 95 % intervals of
+    +-80 %). The model as given, simulated, where the refit diverges (None: that diverges too)."""
+    refit = _training_fit(data, runner, model, effect_slots_of(data, model) + rig_slots(data))
     new = runner.simulate(refit)
     return (refit, new) if new is not None else (model, runner.simulate(model))
+
+
+def _training_fit(data: Data, runner: Runner, start: Model, free: list[Slot]) -> Model:
+    """`start` with its `free` parameters refit on the training blocks in noise units (refine.in_noise), as a
+    finding's polish: POLISH_ITERATIONS Levenberg-Marquardt iterations."""
+    return levenberg(in_noise(data, runner), start, free, [value_of(start, s) for s in free], None, POLISH_ITERATIONS)[0]
