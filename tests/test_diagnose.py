@@ -335,6 +335,32 @@ def test_rescreen_finds_a_far_basin_on_the_ladder():
     assert cand.checked == pytest.approx(1 - float(law(LADDER_RATIO**-5)[0]) ** 2, rel=1e-12)
 
 
+def test_rescreen_simulates_a_switch_candidate_between_its_levels():
+    """rescreen(): a log-scaled switch candidate (a backlash's width) is probed at SWITCH_LEVELS, a decade apart, and
+    simulated at its estimate, the best level, and half a level's step either side (x and / sqrt(10)). Stand-in for
+    seed 75's watflex-55e80326 (a 0.023 rad elbow backlash probed at 0.080 and 0.0080 rad, worse than no effect at its
+    estimate, never fitted): r(w) = r0 (1 - 0.95 exp(-(ln(w / 0.023) / 0.3)^2)) + 0.5 r0 [w > 0.05], estimate 0.080:
+    there 1 - 1.5^2 = -1.25, at 0.080 / sqrt(10) = 0.0253 the gain is 1 - (1 - 0.95 exp(-(ln(0.0253 / 0.023) /
+    0.3)^2))^2 = 0.989 and the estimate goes there; a candidate with a neutral value gets no such points."""
+    from watflex_sim.diagnosis import Candidate, Model, Slot
+    from watflex_sim.diagnosis.screening import SWITCH_LEVELS, between_levels, rescreen
+
+    r0 = np.ones(10)
+    law = lambda w: r0 * (1 - 0.95 * math.exp(-((math.log(w / 0.023) / 0.3) ** 2))) + 0.5 * r0 * (w > 0.05)  # noqa: E731
+    width = Slot(("effect", -1, "width"), 5e-6, 0.2, True)
+    cand = Candidate("backlash", "elbow", {"width": 0.080, "position": 0.0}, {"width": width, "position": Slot(("effect", -1, "position"), -1.0, 1.0)},
+                     {}, estimate={"width": 0.080, "position": 0.0}, gain=0.15)
+    cand.signature = {level: {"switch": r0} for level in SWITCH_LEVELS}
+    step = math.sqrt(10.0)
+    assert [v["width"] for v in between_levels(cand)] == pytest.approx([0.2, 0.080 / step])  # 0.253 clipped to the slot's 0.2
+    rescreen(lambda models: [law(m.effects[-1]["width"]) for m in models], [cand], Model(), np.zeros((10, 0)), [], np.zeros(0), r0)
+    assert cand.estimate["width"] == pytest.approx(0.080 / step, rel=1e-12)
+    assert cand.checked == pytest.approx(1 - float(law(0.080 / step)[0]) ** 2, rel=1e-12) and cand.checked > 0.98
+    ratio = Candidate("stiffness", "link", {"ratio": 0.9}, {"ratio": Slot(("effect", -1, "ratio"), 0.02, 1000.0, True)}, {"ratio": 1.0})
+    ratio.signature = {1.0: {"ratio": r0}}
+    assert between_levels(ratio) == []
+
+
 def test_shortlist_swaps_a_candidate_its_simulation_refutes():
     """shortlist(): a candidate that rescreen found worse than no effect at all (checked < 0) gives its
     place to the best one it found better that is not on the list (seed 11, an independent simulator's
