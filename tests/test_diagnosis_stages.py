@@ -1112,6 +1112,47 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     assert found_cost < 0.1 * cost(evaluate([cand.model(Model(), start)])[0])
 
 
+def test_every_period_rung_is_carried_one_step_before_the_best_are_chosen():
+    """scan_rungs(every=True), as period_scans runs it: every rung's first linear estimate is simulated and the rest
+    taken by the three best first estimates and the three that cost least there. Stand-in for stick-slip (seed 75,
+    watflex-6cc78dba: an elbow ripple of 0.56 N m at 1.231 rad, the rung at 1.05 rad not among the three best first
+    estimates, fitted at 0.344 rad, 8 x the noise): the motion answers only the torque beyond a dead zone of 0.2 N m,
+    r = dz(ripple) - dz(truth), the truth 0.6 N m at 0.761 rad (phase -2.575), probed at 0.5 N m. The probe's column is
+    the ripple's tips only, and the three best first estimates end at 4.096 rad, cost 16.0; with every rung carried
+    one step the scan lands on the rung at 0.762 rad, cost 0.24, and never costs more than from those three."""
+    from watflex_sim.diagnosis import scan
+    from watflex_sim.diagnosis.screening import Candidate
+
+    motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
+
+    def torque(e):
+        return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
+
+    def dead_zone(t):
+        return np.sign(t) * np.maximum(np.abs(t) - 0.2, 0.0)
+
+    truth = {"amplitude": 0.6, "period": 0.761, "phase": -2.575, "spring": 0.0}
+
+    def evaluate(models):
+        return [dead_zone(torque(m.effects[-1])) - dead_zone(torque(truth)) for m in models]
+
+    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
+             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 0.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
+                     slots, {"amplitude": 0.0, "spring": 0.0})
+    cost = lambda r: float(r @ r)  # noqa: E731
+    none = np.zeros((x.size, 0))
+    start = dict(cand.start)
+    ways = [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)), start)]
+    (found, found_cost), = scan.period_scans(evaluate, cand, Model(), start, ways)
+    rungs = scan.scan_rungs
+    with patch.object(scan, "scan_rungs", lambda *a, **k: rungs(*a, **{**k, "every": False})):
+        (three, three_cost), = scan.period_scans(evaluate, cand, Model(), start, ways)
+    assert abs(three["period"] / truth["period"] - 1) > 0.5 and three_cost > 10.0
+    assert abs(found["period"] / truth["period"] - 1) < 0.02 and found_cost < 0.5
+    assert found_cost <= three_cost
+
+
 def test_a_ripples_period_is_scanned_beside_the_other_effects_the_shortlist_names():
     """scan.period_scans() with scan.beside(): a ripple's period scanned against a residual that another missing
     effect dominates lands where a wrong period mimics that effect (seed 68, watflex-db048a3c: an elbow ripple of

@@ -174,11 +174,14 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     (`given`) the values given are returned as (values, their `cost` of the residual), least first; none where the
     effect at neutral diverges. `as_own(v, coefficients)` gives the effect's values at rung v. With `local`, the
     steps take the rung's coefficients' slopes at the contender (`_nudge`), not the probes' secants from neutral.
-    With `every`, every rung takes the first step and the PERIOD_CHECKED best after it the rest: the first estimate,
+    With `every`, every rung takes the first step (a simulation at its first estimate), and the rest is taken by the
+    PERIOD_CHECKED best first estimates and the PERIOD_CHECKED whose simulation there costs least: the first estimate,
     from probes at the start's size, is rough where the effect is large and stick-slip bends its residual (seed 75,
     watflex-6cc78dba, an elbow ripple of 0.56 N m at 1.23 rad: the rung at 1.05 rad was not among the three best
     first estimates and the fit ended at 0.34 rad, 8 x the noise; carried on, it scans at 6.5e5 against 0.36 rad's
-    1.5e6). One such list per way, in order (all [] where the effect at neutral diverges)."""
+    1.5e6). Either ranking alone loses cases the other finds (a dead-zone stand-in, test_diagnosis_stages); together
+    the scan is never worse than from the first three alone, whose steps are the same. One such list per way, in order
+    (all [] where the effect at neutral diverges)."""
     zero = {**values, **cand.neutral}
     probes = [(v, rung_probes(v)) for v in rungs]
     runs = evaluate([cand.model(base, zero)] + [cand.model(base, {**zero, n: cand.probe(n)}) for n in fixed]
@@ -193,8 +196,8 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
 def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost, rig: tuple, probes: list, runs: list,
            r0: np.ndarray, shared: list, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
            given: bool, local: bool, every: bool) -> list[tuple[dict[str, float], float]]:
-    """scan_rungs' one way: the rungs ranked by their linear estimate beside `rig`'s columns (with `every`, after
-    the first Gauss-Newton step), the best carried on."""
+    """scan_rungs' one way: the rungs ranked by their linear estimate beside `rig`'s columns (with `every`, also by
+    the simulated cost at it), the best carried on."""
     rig_columns, u_rig, lo_rig, hi_rig = rig
     slots = [cand.slots[n] for n in fixed] + rung_slots
     lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
@@ -228,9 +231,9 @@ def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cos
                 r_h = next(nudged)
                 if r is not None and r_h is not None:
                     local_columns[:, len(u_rig) + j] = (r_h - r) / h[j]
-            left, x_next = (math.inf, x) if r is None else estimate(local_columns, r, x)
-            moved.append((left, v, x_next, columns))
-        contenders = [(v, x, columns) for _, v, x, columns in sorted(moved, key=lambda m: m[0])[:PERIOD_CHECKED]]
+            moved.append((math.inf if r is None else cost(r), v, x if r is None else estimate(local_columns, r, x)[1], columns))
+        least = sorted(range(len(moved)), key=lambda i: moved[i][0])[:PERIOD_CHECKED]  # by the simulated cost at x
+        contenders = [m[1:] for i, m in enumerate(moved) if i < PERIOD_CHECKED or i in least]  # and the best first estimates
     tried = [values] * given + [as_values(v, x) for v, x, _ in contenders]
     costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
     return sorted(zip(tried, costs), key=lambda vc: vc[1])
