@@ -174,8 +174,8 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     (`given`) the values given are returned as (values, their `cost` of the residual), least first; none where the
     effect at neutral diverges. `as_own(v, coefficients)` gives the effect's values at rung v. With `local`, the
     steps take the rung's coefficients' slopes at the contender (`_nudge`), not the probes' secants from neutral.
-    With `every`, every rung takes the first step (a simulation at its first estimate), and the rest is taken by the
-    PERIOD_CHECKED best first estimates and the PERIOD_CHECKED whose simulation there costs least: the first estimate,
+    With `every`, every rung takes the first step (a simulation at its first estimate), and each step is followed by
+    the PERIOD_CHECKED best first estimates and the PERIOD_CHECKED whose simulation in it cost least: the first estimate,
     from probes at the start's size, is rough where the effect is large and stick-slip bends its residual (seed 75,
     watflex-6cc78dba, an elbow ripple of 0.56 N m at 1.23 rad: the rung at 1.05 rad was not among the three best
     first estimates and the fit ended at 0.34 rad, 8 x the noise; carried on, it scans at 6.5e5 against 0.36 rad's
