@@ -1073,6 +1073,13 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     assert _canonical(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))
 
 
+def _ripple_slots(motion: float) -> dict:
+    """A position-dependent friction's slots for the ripple stand-ins below, the period's in a motion range `motion` (rad)
+    as the catalogue scales it (0.2-200 ranges)."""
+    return {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
+            "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+
+
 def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin():
     """period_scans(): a ripple's residual is far from convex in its period (seed 52: a 0.77 rad Watflex elbow ripple
     fitted at 1.35 rad from the start at 3 x the motion's range, 5 x the noise left). On a stand-in whose residual is
@@ -1093,8 +1100,7 @@ def test_a_ripples_period_is_found_by_a_scan_where_its_start_is_in_another_basin
     def evaluate(models):
         return [torque(m.effects[-1]) - torque(truth) for m in models]
 
-    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
-             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    slots = _ripple_slots(motion)
     cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
                      slots, {"amplitude": 0.0, "spring": 0.0})
     start = {"amplitude": -1.77, "period": 1.63, "phase": 0.0, "spring": 4.32}  # seed 52's screening estimate
@@ -1136,8 +1142,7 @@ def test_every_period_rung_is_carried_one_step_before_the_best_are_chosen():
     def evaluate(models):
         return [dead_zone(torque(m.effects[-1])) - dead_zone(torque(truth)) for m in models]
 
-    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
-             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    slots = _ripple_slots(motion)
     cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 0.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
                      slots, {"amplitude": 0.0, "spring": 0.0})
     cost = lambda r: float(r @ r)  # noqa: E731
@@ -1174,8 +1179,7 @@ def test_a_ripples_period_is_scanned_beside_the_other_effects_the_shortlist_name
         return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
 
     truth = {"amplitude": 0.85, "period": 0.77, "phase": -2.575, "spring": 0.0}
-    slots = {"amplitude": Slot(("effect", -1, "amplitude"), -15.0, 15.0), "period": Slot(("effect", -1, "period"), 0.2 * motion, 200 * motion, log=True),
-             "phase": Slot(("effect", -1, "phase"), -np.pi, np.pi), "spring": Slot(("effect", -1, "spring"), -50.0, 50.0)}
+    slots = _ripple_slots(motion)
     cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.5, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
                      slots, {"amplitude": 0.0, "spring": 0.0}, periodic="period")
     other = Candidate("coulomb_friction", "elbow", {"torque": 0.5}, {"torque": Slot(("effect", -1, "torque"), 0.0, 5.0)}, {"torque": 0.0})

@@ -356,21 +356,15 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
         for values in (cand.estimate, halfway) if halfway != cand.estimate else (cand.estimate,):
             models.append(cand.model(base, values))
             owners.append(cand)
-    between = [(cand, values) for cand in todo for values in between_levels(cand)]
     def gain_of(r: np.ndarray | None) -> float:
         return -math.inf if r is None else (cost_rig - refit_cost(columns, r, at, lo, hi)) / cost0
 
     gains: dict[int, list[float]] = {}
-    runs = evaluate(models + [cand.model(base, values) for cand, values in between])
-    for cand, r in zip(owners, runs):
+    for cand, r in zip(owners, evaluate(models)):
         gain = gain_of(r)
         gains.setdefault(id(cand), []).append(gain)
         if r is not None:
             cand.checked = gain if cand.checked is None else max(cand.checked, gain)
-    for (cand, values), r in zip(between, runs[len(models):]):
-        gain = gain_of(r)
-        if r is not None and (cand.checked is None or gain > cand.checked):
-            cand.checked, cand.estimate = gain, values
     # on along the line while the gain still rises from half-way to the estimate: a linear signature taken
     # near neutral under-reaches an effect far from it (a beam 0.26 x as stiff, estimated at 0.43 x)
     rising = [c for c in todo if len(gains[id(c)]) == 2 and gains[id(c)][0] > max(gains[id(c)][1], 0.0)]
@@ -393,12 +387,13 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     for key, k in made.items():  # between the moves: the line's best lies anywhere from half to twice the last
         cand, first = starts[key]
         search_along(evaluate, cand, base, first, 2.0 ** k, gain_of)
-    rungs = [(cand, value) for cand in todo for value in ladder(cand)]
-    runs = evaluate([cand.model(base, {**cand.estimate, cand.ladder: value}) for cand, value in rungs]) if rungs else []
-    for (cand, value), r in zip(rungs, runs):
+    tries = [(cand, {**cand.estimate, cand.ladder: value}) for cand in todo for value in ladder(cand)]
+    tries += [(cand, values) for cand in todo for values in between_levels(cand)]
+    runs = evaluate([cand.model(base, values) for cand, values in tries]) if tries else []
+    for (cand, values), r in zip(tries, runs):
         gain = gain_of(r)
         if r is not None and (cand.checked is None or gain > cand.checked):
-            cand.checked, cand.estimate = gain, {**cand.estimate, cand.ladder: value}
+            cand.checked, cand.estimate = gain, values
 
 
 def between_levels(cand: Candidate) -> list[dict[str, float]]:
@@ -406,13 +401,11 @@ def between_levels(cand: Candidate) -> list[dict[str, float]]:
     (x and / the square root of their ratio) either way, within its slot: such an effect is far from linear in its
     size between two levels (seed 75, watflex-55e80326: a 0.023 rad elbow backlash, probed at 0.080 and 0.0080 rad,
     simulated at its estimate worse than no effect and never fitted; at 0.025 rad it leaves 1.6 x the noise from
-    13.8 x). [] for any other candidate."""
-    if cand.neutral or "switch" not in next(iter(cand.signature.values()), {}):
+    13.8 x). [] for any other candidate (one with a neutral value is probed by level, not switched: `probes`)."""
+    first = next(iter(cand.start), None)
+    if cand.neutral or first is None or not cand.slots[first].log:
         return []
-    first = next(iter(cand.start))
     slot = cand.slots[first]
-    if not slot.log:
-        return []
     step = math.sqrt(SWITCH_LEVELS[0] / SWITCH_LEVELS[1])
     out = [{**cand.estimate, first: float(np.clip(cand.estimate[first] * f, slot.low, slot.high))} for f in (step, 1 / step)]
     return [v for v in out if v != cand.estimate]
