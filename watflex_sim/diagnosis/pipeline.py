@@ -5,7 +5,8 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 (kept only if validation does not get worse); locate; rounds of screening, candidate fits (in the first round also
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
-validation by MIN_HELD_GAIN; each earlier round's runners-up refit in its winner's place beside the later findings
+validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
+hunts leaves more to noise than the nominal one); each earlier round's runners-up refit in its winner's place beside the later findings
 (refine.swap_earlier: a round chose with the later effects missing); backward elimination (a finding whose removal
 from the final model does not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
@@ -27,7 +28,8 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
-from .refit import calibrate_noise, final_refit, fine_for_round, keep_fidelity, refit_nominal, refit_on_training
+from .refit import (calibrate_noise, final_refit, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
+                    refit_on_training)
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -205,6 +207,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             current, sims = best["model"], best["sims"]
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         round_models[_places(current)] = current
+        if raise_noise_floor(data, runner, current, sims, say):  # later rounds, the verdict and elimination judge by it
+            per = unit_change(data)
+            steps.append({"model": "the same, judged by the floors it raises", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
     else:  # the loop ran to the limit: whether a further effect would earn its place was never asked
         limited = max_effects

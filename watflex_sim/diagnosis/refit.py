@@ -9,7 +9,8 @@ is near the noise but short of it, until training and validation are within it) 
 if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
 their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in `data.idle`.
 `calibrate_noise` adds to `data` what the rig's noise leaves in closed loop and what a finer
-discretisation changes. `final_refit` refits a chosen model's parameters on all the data (again from a point
+discretisation changes; `raise_noise_floor` measures both again with a model's findings in and raises the floors they
+exceed. `final_refit` refits a chosen model's parameters on all the data (again from a point
 further along a shape or quantised parameter where a profile there costs less: level.level_start) and returns it with
 its simulations and its counterpart fitted on the training blocks.
 """
@@ -40,6 +41,8 @@ COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's
 COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise gets the pattern search; one further
 # off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
 # refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
+RAISED = 1.1  # raise_noise_floor raises a channel's floor measured again with the findings only beyond this factor
+# (a noise ratio 10 % lower: within what the floor's own estimate moves by, and the rest of the diagnosis unchanged)
 CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
 COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
 # nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
@@ -207,6 +210,35 @@ def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recordi
         finer = runner.simulate(model, finer=FINER)
         if finer is not None:
             add_discretisation_error(data, sims, finer)
+
+
+def raise_noise_floor(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[str]:
+    """Measure again what the rig's noise leaves in closed loop and what a finer discretisation changes, with `model`
+    (calibrate_noise from the recordings' own noise, `data.sensor_noise`), and raise to it each channel's floor that it
+    exceeds by more than RAISED (its per-sample floors too). The floor was measured with the refit nominal model; a
+    finding that makes the loop hunt or stick can make it far more sensitive to noise and step: seed 75's
+    laser_arm-214f6418, a hub backlash of 1.234e-4 rad in closed loop, raised the tip sensor's floor 12 x (0.0101 to
+    0.1205 V): by the old floor the truth was 6.2 x the noise and a spurious beam damping x6.2 earned its place beside
+    the backlash found (1.28 x); by the new, the truth is 1.03 x and the backlash found 1.27 x. Returns "recording:
+    channel xfactor" of each floor raised."""
+    scratch = replace(data, noise=[dict(n) for n in data.sensor_noise])
+    calibrate_noise(scratch, runner, model, sims, lambda *a: None)
+    raised = []
+    for i, name in enumerate(data.names):
+        for c in data.channels[i]:
+            if scratch.noise[i][c] <= RAISED * data.noise[i][c]:
+                continue
+            raised.append(f"{name}: {c} x{scratch.noise[i][c] / data.noise[i][c]:.2g}")
+            data.noise[i][c] = scratch.noise[i][c]
+            for kind in ("closed_loop_sq", "discretisation_sq", "discretisation"):
+                mine, new = getattr(data, kind), getattr(scratch, kind)
+                if new and c in new[i]:
+                    if not mine:
+                        setattr(data, kind, mine := [{} for _ in data.names])
+                    mine[i][c] = np.maximum(mine[i].get(c, 0.0), new[i][c])
+    if raised:
+        say("noise", "with the findings in, noise and step leave more: floors raised (" + ", ".join(raised) + ")")
+    return raised
 
 
 def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording], Model]:
