@@ -17,6 +17,7 @@ far above what noise and discretisation leave there (locate.local_excess: such w
 from __future__ import annotations
 
 import time
+from copy import deepcopy
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
-from .refit import (calibrate_noise, final_refit, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
+from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
                     refit_on_training)
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
@@ -84,6 +85,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     refit = refit_nominal(data, runner, say)
     sims_nominal, current, sims, free, rig_columns = refit.sims_nominal, refit.model, refit.sims, refit.free, refit.rig_columns
     calibrate_noise(data, runner, current, sims, say)
+    nominal_floors = deepcopy({k: getattr(data, k) for k in FLOORS})  # restored should every finding be dropped
     per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
@@ -229,6 +231,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         sims = runner.simulate(current) or sims
     while True:  # until every finding's intervals tell it from no effect (explain.indistinct)
         current, sims, ablated = eliminate(data, runner, current, sims, say, local)
+        if not current.effects:  # judged by what noise leaves without the findings that raised the floors
+            for name, floor in deepcopy(nominal_floors).items():
+                setattr(data, name, floor)
         if len(current.effects) < found:
             steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit

@@ -212,6 +212,9 @@ def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recordi
             add_discretisation_error(data, sims, finer)
 
 
+FLOORS = ("noise", "closed_loop_sq", "discretisation_sq", "discretisation")  # the Data fields raise_noise_floor raises
+
+
 def raise_noise_floor(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[str]:
     """Measure again what the rig's noise leaves in closed loop and what a finer discretisation changes, with `model`
     (calibrate_noise from the recordings' own noise, `data.sensor_noise`), and raise to it each channel's floor that it
