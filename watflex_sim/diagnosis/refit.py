@@ -233,7 +233,7 @@ def raise_noise_floor(data: Data, runner: Runner, model: Model, sims: list[Recor
                 continue
             raised.append(f"{name}: {c} x{scratch.noise[i][c] / data.noise[i][c]:.2g}")
             data.noise[i][c] = scratch.noise[i][c]
-            for kind in ("closed_loop_sq", "discretisation_sq", "discretisation"):
+            for kind in FLOORS[1:]:  # the per-sample floors and the discretisation part
                 mine, new = getattr(data, kind), getattr(scratch, kind)
                 if new and c in new[i]:
                     if not mine:
