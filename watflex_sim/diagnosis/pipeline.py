@@ -6,7 +6,7 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
 validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
-hunts leaves more to noise than the nominal one); each earlier round's runners-up refit in its winner's place beside the later findings
+hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each earlier round's runners-up refit in its winner's place beside the later findings
 (refine.swap_earlier: a round chose with the later effects missing); backward elimination (a finding whose removal
 from the final model does not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
@@ -29,8 +29,8 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
-from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
-                    refit_on_training)
+from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, floors_after_dropping, held_without,
+                    keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training)
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -85,7 +85,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     refit = refit_nominal(data, runner, say)
     sims_nominal, current, sims, free, rig_columns = refit.sims_nominal, refit.model, refit.sims, refit.free, refit.rig_columns
     calibrate_noise(data, runner, current, sims, say)
-    nominal_floors = deepcopy({k: getattr(data, k) for k in FLOORS})  # restored should every finding be dropped
+    nominal_floors = deepcopy({k: getattr(data, k) for k in FLOORS})  # judged by again where findings are dropped
+    raised = False  # whether a finding raised the floors (raise_noise_floor)
     per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
     steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
     refit_sims, refit_model = sims, current
@@ -210,6 +211,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
         round_models[_places(current)] = current
         if raise_noise_floor(data, runner, current, sims, say):  # later rounds, the verdict and elimination judge by it
+            raised = True
             per = unit_change(data)
             steps.append({"model": "the same, judged by the floors it raises", **_scores(data, sims, current)})
         mismatch = locate(data, sims) or mismatch
@@ -230,10 +232,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if len(current.effects) < found:
         sims = runner.simulate(current) or sims
     while True:  # until every finding's intervals tell it from no effect (explain.indistinct)
+        kept = len(current.effects)
         current, sims, ablated = eliminate(data, runner, current, sims, say, local)
-        if not current.effects:  # judged by what noise leaves without the findings that raised the floors
-            for name, floor in deepcopy(nominal_floors).items():
-                setattr(data, name, floor)
+        if raised and len(current.effects) < kept:  # judged by what noise leaves without the dropped findings
+            floors_after_dropping(data, runner, current, sims, nominal_floors, say)
         if len(current.effects) < found:
             steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
@@ -244,14 +246,16 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
         say("intervals", "95 % intervals from the Jacobian at the final model and the training-only fit")
         ranges = final_intervals(data, runner, current, sims, trained)
-        vague = vague_findings(data, current, ranges, ablated, held_f)
+        vague = vague_findings(data, current, ranges, ablated, held_f, lambda i: held_without(data, runner, trained, i))
         if not vague:
             break
         say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
                                                    for i in vague) + ": its 95 % intervals include no effect at all")
         rejected += [{"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
                       "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
-                      "intervals": ranges.get(i, {}), "why": "its 95 % intervals include no effect at all"} for i in vague]
+                      "intervals": ranges.get(i, {}),
+                      "why": "its 95 % intervals include no effect at all and validation without it is not far worse"}
+                     for i in vague]
         found = len(trained.effects)
         current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
         if current.effects:  # its numbers were fitted beside the dropped: fitted again, from a round's fit of it if any
@@ -260,6 +264,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             sims = new or sims
         else:  # the rig's parameters as refit without effects, not as they were fitted beside the dropped ones
             current, sims = refit_model, refit_sims
+        if raised:
+            floors_after_dropping(data, runner, current, sims, nominal_floors, say)
     current, ranges = _canonical(current, ranges)
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []

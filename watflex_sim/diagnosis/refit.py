@@ -16,6 +16,7 @@ its simulations and its counterpart fitted on the training blocks.
 """
 from __future__ import annotations
 
+from copy import deepcopy
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -244,6 +245,17 @@ def raise_noise_floor(data: Data, runner: Runner, model: Model, sims: list[Recor
     return raised
 
 
+def floors_after_dropping(data: Data, runner: Runner, model: Model, sims: list[Recording], nominal: dict, say) -> None:
+    """Set the floors `model`, left after elimination dropped findings, is judged by: the nominal model's (`nominal`,
+    the FLOORS fields as calibrate_noise left them), raised again by what noise and step leave with the findings kept
+    (raise_noise_floor; none kept: the nominal model's as they were, no simulation). A floor raised by a dropped
+    finding's hunting would otherwise judge the rest by a noise their model does not make."""
+    for name, floor in deepcopy(nominal).items():
+        setattr(data, name, floor)
+    if model.effects:
+        raise_noise_floor(data, runner, model, sims, say)
+
+
 def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording], Model]:
     """The chosen model's parameters (its effects' and the rig's) refit on all the data, training and
     validation blocks alike, in noise units (`in_units`): the structure was chosen and judged on data the
@@ -282,6 +294,14 @@ def refit_on_training(data: Data, runner: Runner, model: Model) -> tuple[Model, 
     refit = _training_fit(data, runner, model, effect_slots_of(data, model) + rig_slots(data))
     new = runner.simulate(refit)
     return (refit, new) if new is not None else (model, runner.simulate(model))
+
+
+def held_without(data: Data, runner: Runner, model: Model, i: int) -> dict | None:
+    """Validation scores (fit_scores, held_out) of `model` without its i-th finding, the rest and the rig's parameters
+    refit on the training blocks (refit_on_training); None where that diverges."""
+    rest = Model([e for j, e in enumerate(model.effects) if j != i], dict(model.parameters))
+    sims = refit_on_training(data, runner, rest)[1]
+    return None if sims is None else fit_scores(data, sims, "held_out")
 
 
 def _training_fit(data: Data, runner: Runner, start: Model, free: list[Slot]) -> Model:
