@@ -1456,6 +1456,16 @@ def test_a_difference_over_a_cliff_is_taken_from_the_gentler_side():
     assert narrow[1] - narrow[0] < 0.001
     white = 1.96 / (3 * np.sqrt(1000))  # the white-noise half-width from the gentle column
     assert white <= (wide[1] - wide[0]) / 2 <= 1.6 * white
+    # a parameter fitted a hair above its lower bound (seed 77's one-way shoulder Coulomb friction, the other side at
+    # 8e-17 N m): the step back to the bound changes nothing, and is no side at all; the forward column stays
+    # (k's residual now 2 k along the ramp: its least squares at the bound, 1.96 sd = 0.054)
+    at_bound = Model([{"effect": "test", "where": "here", "gain": 1.5, "k": 8e-17}])
+    near = lambda models: [residual(m.effects[0]["gain"], 1.0 + m.effects[0]["k"]) for m in models]  # noqa: E731
+    u0, r0 = np.array([1.5, 8e-17]), near([at_bound])[0]
+    forward0 = jacobian(near, at_bound, slots, u0, r0)
+    kept = gentler_side(near, at_bound, slots, u0, r0, forward0, 2)
+    assert np.array_equal(kept[:, 1], forward0[:, 1])
+    assert intervals(slots, at_bound, kept, r0)[1][1] < 0.1  # not its whole bounds (3)
 
 
 def test_the_screening_refits_the_findings_so_far_beside_the_rigs_parameters(laser_recordings):

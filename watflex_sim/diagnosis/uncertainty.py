@@ -205,7 +205,11 @@ def gentler_side(evaluate, model: Model, slots: list[Slot], u: np.ndarray, r: np
     no longer overcomes: the joint stays stuck) claims the parameter is known to the width of that cliff's foot.
     Seed 54, a Watflex dwell-time stiction found at gain 1.53, time constant 1.61 s (truth 0.60, 0.39 s): +0.15 of
     gain changed the residual by |dr| = 2.3e5 noise units against 390 for -0.15, and the gain's interval was +-0.002.
-    The gentler side bounds how far the estimate can move with the cost within the noise on at least that side."""
+    The gentler side bounds how far the estimate can move with the cost within the noise on at least that side.
+    A step the other way that a bound cuts to less than half the forward step's is no side at all: seed 77's
+    two-joint watflex-8da6e87a, a one-way shoulder Coulomb friction whose other side was fitted at 8e-17 N m, stepped
+    back 8e-17 to the bound, saw no change, and its column, so zeroed, gave that side its whole bounds [0, 65.8] N m
+    (0.05 N m there costs 2.3 x the noise)."""
     if n == 0:
         return J
     J, back = J.copy(), []
@@ -215,7 +219,7 @@ def gentler_side(evaluate, model: Model, slots: list[Slot], u: np.ndarray, r: np
         back.append(v)
     runs = evaluate([at_internal(v, slots, model) for v in back])
     for i, (v, rv) in enumerate(zip(back, runs)):
-        if rv is not None and v[i] != u[i]:
+        if rv is not None and abs(v[i] - u[i]) >= 0.5 * abs(fd_step(slots[i], u[i])):
             column = (rv - r) / (v[i] - u[i])
             if np.linalg.norm(column) < np.linalg.norm(J[:, i]):
                 J[:, i] = column
