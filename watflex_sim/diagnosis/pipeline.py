@@ -30,7 +30,7 @@ from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
 from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, floors_after_dropping, held_without,
-                    keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training)
+                    keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training, without_findings)
 from .runner import Runner, evaluator, in_units
 from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
                         signatures, with_findings)
@@ -236,6 +236,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         current, sims, ablated = eliminate(data, runner, current, sims, say, local)
         if raised and len(current.effects) < kept:  # judged by what noise leaves without the dropped findings
             floors_after_dropping(data, runner, current, sims, nominal_floors, say)
+        if kept and not current.effects:
+            current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
         if len(current.effects) < found:
             steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
@@ -262,10 +264,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             say("elimination", "refitting the rest on the training blocks")
             current, new = refit_on_training(data, runner, round_models.get(_places(current), current))
             sims = new or sims
-        else:  # the rig's parameters as refit without effects, not as they were fitted beside the dropped ones
-            current, sims = refit_model, refit_sims
-        if raised:
-            floors_after_dropping(data, runner, current, sims, nominal_floors, say)
+            if raised:
+                floors_after_dropping(data, runner, current, sims, nominal_floors, say)
+        else:
+            if raised:
+                floors_after_dropping(data, runner, current, sims, nominal_floors, say)  # no simulation
+            current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
     current, ranges = _canonical(current, ranges)
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []
