@@ -1894,26 +1894,37 @@ def test_a_hunting_loop_raises_the_noise_floor_it_is_judged_by():
         assert data.noise == with_backlash
 
 
-def test_with_every_finding_dropped_the_rig_is_refit_from_where_their_fits_left_it(monkeypatch):
-    """refit.without_findings: once every finding is dropped, the rig's parameters are refit without effects from
-    where the findings' fits left them, and taken where that leaves less on training and no more on validation than
-    the nominal refit. Seed 78's two-joint clean watflex-1875e76b: the nominal refit at 8.16 / 7.74 x the noise
-    (training / validation), a strain gain of 1 fitted beside the rig's parameters at 0.83 / 0.86 x, dropped as vague,
-    and the case left `unexplained` with the nominal refit's parameters. Stand-ins for the refit and the scores."""
+def test_with_no_finding_left_the_rig_is_refit_in_the_floors_units(monkeypatch):
+    """refit.without_findings: where no finding is left and the nominal refit is not within the noise, the rig's
+    parameters are refit without effects (in the calibrated floors' units) from where the findings' fits left them
+    and from the nominal refit's, and the better on training is taken where it is no worse on validation than the
+    nominal refit. Seed 78's two-joint clean watflex-1875e76b: the nominal refit at 8.16 / 7.74 x the noise (training
+    / validation), a strain gain of 1 fitted beside the rig's parameters at 0.83 / 0.86 x, dropped as vague, and the
+    case left `unexplained` at the nominal refit. Stand-ins for the refit and the scores."""
     from watflex_sim.diagnosis import refit as R
 
-    nominal_sims, new_sims = ["nominal"], ["new"]
     ratios = {("nominal", "train"): 8.16, ("nominal", "held_out"): 7.74}
-    monkeypatch.setattr(R, "fit_scores", lambda data, sims, part: {"noise_ratio": ratios[(sims[0], part)]})
-    left = Model([], {"link2_EI": 0.955})
-    nominal = Model([], {"link2_EI": 1.05})
+    monkeypatch.setattr(R, "fit_scores", lambda data, sims, part: {"noise_ratio": ratios[(sims[0], part)],
+                                                                   "worst_ratio": ratios[(sims[0], part)]})
+    left, nominal, nominal_sims = Model([], {"link2_EI": 0.955}), Model([], {"link2_EI": 1.05}), ["nominal"]
+    fits = {0.955: (0.951, ["from left"]), 1.05: (1.03, ["from nominal"])}
     seen = []
-    monkeypatch.setattr(R, "refit_on_training", lambda data, runner, m: seen.append(m) or (Model([], {"link2_EI": 0.951}), new_sims))
-    ratios |= {("new", "train"): 0.83, ("new", "held_out"): 0.86}
+
+    def refit_on_training(data, runner, m):
+        seen.append(m)
+        value, sims = fits[m.parameters["link2_EI"]]
+        return Model([], {"link2_EI": value}), sims
+    monkeypatch.setattr(R, "refit_on_training", refit_on_training)
+    ratios |= {("from left", "train"): 0.83, ("from left", "held_out"): 0.86,
+               ("from nominal", "train"): 2.1, ("from nominal", "held_out"): 2.0}
     model, sims = R.without_findings(None, None, left, nominal, nominal_sims, lambda *a: None)
-    assert sims is new_sims and model.parameters == {"link2_EI": 0.951}
-    assert seen[0].parameters == left.parameters and not seen[0].effects  # started where the findings' fits left it
-    ratios[("new", "held_out")] = 7.8  # better on training, worse on validation: the nominal refit stays
+    assert sims == ["from left"] and model.parameters == {"link2_EI": 0.951}
+    assert [m.parameters for m in seen] == [left.parameters, nominal.parameters] and not any(m.effects for m in seen)
+    ratios[("from left", "held_out")] = 7.8  # better on training, worse on validation than the nominal refit
+    assert R.without_findings(None, None, left, nominal, nominal_sims, lambda *a: None)[1] == ["from nominal"]
+    ratios[("from nominal", "held_out")] = 7.9
     assert R.without_findings(None, None, left, nominal, nominal_sims, lambda *a: None) == (nominal, nominal_sims)
-    monkeypatch.setattr(R, "refit_on_training", lambda data, runner, m: (m, None))  # diverged
+    ratios[("nominal", "train")] = ratios[("nominal", "held_out")] = 0.9  # within the noise: no refit at all
+    seen.clear()
     assert R.without_findings(None, None, left, nominal, nominal_sims, lambda *a: None) == (nominal, nominal_sims)
+    assert seen == []

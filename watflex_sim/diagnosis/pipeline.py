@@ -227,6 +227,10 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
             alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
             if rival(loser, winner, later=True, absorbable=data.absorbable)]
+    if not current.effects:  # nothing earned its place
+        current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
+        if current is not refit_model:
+            steps.append({"model": "parameters refit in the floors' units", **_scores(data, sims, current)})
     found = len(current.effects)
     current = fold_within_tolerance(data, current)
     if len(current.effects) < found:
