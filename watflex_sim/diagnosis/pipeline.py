@@ -6,9 +6,11 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
 validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
-hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each earlier round's runners-up refit in its winner's place beside the later findings
-(refine.swap_earlier: a round chose with the later effects missing); backward elimination (a finding whose removal
-from the final model does not worsen validation is dropped); 95 % intervals; alternatives within noise of the chosen one and,
+hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each
+earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
+with the later effects missing); backward elimination (a finding whose removal from the final model does not worsen
+validation is dropped); where no finding is left, the rig's parameters refit in the floors' units
+(refit.without_findings); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
