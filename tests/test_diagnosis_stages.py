@@ -333,6 +333,38 @@ def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
     assert fit_scores(data, sims, "train")["worst_ratio"] == pytest.approx((3.0 + 0.0) / 2, abs=0.1)
 
 
+def test_a_channel_whose_floor_is_our_discretisation_is_judged_by_its_upper_estimate(laser_recordings):
+    """A channel judged on its own counts the discretisation part of its floor DISCRETISATION_COUNT = 2 times (as a
+    window's local null does): with 0.8 of a noise n our discretisation, the floor alone is n sqrt(1 + 3 x 0.64) =
+    1.709 n (closed form), so a motor-current misfit of 1.5 n sits at 0.88 x (within), one of 3 n at 1.76 x (not);
+    the mean over channels still divides by n. A channel without a discretisation part is judged as before."""
+    from watflex_sim.diagnosis.data import fit_scores
+    from watflex_sim.diagnosis.validate import within_noise
+
+    data = prepare(laser_recordings, ["a", "b"])
+    data.discretisation = [{"motor_current": 0.8 * noise["motor_current"]} for noise in data.noise]
+
+    def scores(current_off: float, tip_off: float = 0.0):
+        sims = []
+        for rec, noise in zip(data.recordings, data.noise):
+            channels = dict(rec.channels)
+            channels["motor_current"] = rec.channels["motor_current"] + current_off * noise["motor_current"]
+            channels["tip_sensor"] = rec.channels["tip_sensor"] + tip_off * noise["tip_sensor"]
+            sims.append(type(rec)(rec.time, channels, rec.meta))
+        return fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+
+    upper = math.sqrt(1 + 3 * 0.8**2)
+    train, held = scores(1.5)
+    assert train["channel_ratios"]["motor_current"] == pytest.approx(1.5 / upper, rel=1e-6)
+    assert train["noise_ratio"] == pytest.approx(1.5 / len(data.channels[0]), rel=1e-6)  # mean: 1.5 n on one channel
+    assert within_noise(train, held)
+    train, held = scores(3.0)
+    assert train["worst_ratio"] == pytest.approx(3.0 / upper, rel=1e-6) and not within_noise(train, held)
+    train, held = scores(0.0, tip_off=1.5)
+    assert train["worst_channel"] == "tip_sensor" and train["worst_ratio"] == pytest.approx(1.5, rel=1e-6)
+    assert not within_noise(train, held)
+
+
 def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
     """validate.curved_channels (seed 58, laser_arm-51359564: a motor current reading +50 % at its peak, y = x (1 + 0.5
     (x / peak)^2), 'explained' by a gain x1.141 at 1.14 x the noise): in miniature, a current of steps and a sine, the

@@ -14,12 +14,11 @@ import numpy as np
 
 from ..recording import Recording
 from ..rigdesc import RigDescription
-from .data import Data, motion_channel, motions
+from .data import DISCRETISATION_COUNT, Data, motion_channel, motions
 
 WINDOW_S = 0.05  # s, moving-RMS window of the residual
 LOCAL_WINDOW_S = 0.1  # s, window of the local test (local_excess)
 LOCAL_MARGIN = 4.0  # a window this far above its local null is a misfit, whatever the whole recording's ratio
-DISCRETISATION_COUNT = 2.0  # the local null counts the discretisation change this many times (see local_null)
 
 
 def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int, motion: tuple[str, np.ndarray] | None = None) -> str:

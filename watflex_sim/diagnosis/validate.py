@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..recording import Recording
-from .data import Data, Model, fit_scores, peak
+from .data import DISCRETISATION_COUNT, Data, Model, fit_scores, peak
 from .explain import indistinct
 from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
 from .runner import Runner
@@ -212,7 +212,7 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
                "asking whether a further effect earns its place")
     worst = max((train, held), key=lambda s: s["worst_ratio"])
     now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
-           f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x")
+           f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x, our discretisation counted {DISCRETISATION_COUNT:g} x there")
     if curved:
         return ("; ".join(f"{c['channel']}'s residual is a static curve of its own value: beyond a gain and an offset "
                           f"({c['noise_ratio']:.2f} x its noise left), a cubic map takes "
