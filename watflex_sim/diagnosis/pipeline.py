@@ -8,8 +8,8 @@ of the best, each kept only if its *final* model improves training by MIN_GAIN p
 validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
 hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each
 earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
-with the later effects missing); backward elimination (a finding whose removal from the final model does not worsen
-validation is dropped); where no finding is left, the rig's parameters refit in the floors' units
+with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); backward
+elimination (a finding whose removal from the final model does not worsen validation is dropped); where no finding is left, the rig's parameters refit in the floors' units
 (refit.without_findings); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
@@ -30,6 +30,7 @@ from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
+from .laws import one_law
 from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
 from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, floors_after_dropping, held_without,
                     keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training, without_findings)
@@ -229,6 +230,14 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
             alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
             if rival(loser, winner, later=True, absorbable=data.absorbable)]
+    if len(current.effects) > 1:  # one friction law where two were found at one joint (laws.one_law)
+        now, tried = one_law(data, runner, scored(data, {"model": current}, sims), PAIR_MARGIN)
+        if now["model"] is not current:
+            say("swap", f"{now['effect']} at {now['where']} explains better than the two friction laws found there")
+            current, sims = now["model"], now["sims"]
+            steps.append({"model": f"{now['effect']} at {now['where']} in place of two laws there", **_scores(data, sims, current)})
+        alternatives += [alternative_entry(data, loser, winner, before) for loser, winner, before in tried
+                         if rival(loser, winner, later=True, absorbable=data.absorbable)]
     if not current.effects:  # nothing earned its place
         current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
         if current is not refit_model:

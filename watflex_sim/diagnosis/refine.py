@@ -199,25 +199,15 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
             continue
         baseline = (fit_scores(data, without, "train"), fit_scores(data, without, "held_out"))
         chosen = gains({**current, "effect": winner["effect"], "where": winner["where"],
-                        "n_params": _n_params(data, current["model"].effects[i])}, *baseline)
+                        "n_params": parameter_count(data, current["model"].effects[i])}, *baseline)
         others = [r for r in runners_up if len(r["model"].effects) == len(winner["model"].effects)
                   and (r["effect"], r["where"]) not in places
                   and r["held_out"]["noise_ratio"] <= SWAP_WITHIN * winner["held_out"]["noise_ratio"]]
         for other in sorted(others, key=lambda r: -r["score"])[:SWAP_TRIES]:
-            effects = rest + [dict(other["model"].effects[-1])]
-            trial = Model(effects, dict(current["model"].parameters))
-            free = effect_slots_of(data, trial) + rig_slots(data)
-            try:
-                model, cost, J = levenberg(in_noise(data, runner), trial, free, [value_of(trial, s) for s in free],
-                                           None, POLISH_ITERATIONS)
-            except Exception:  # noqa: BLE001 - a replacement that diverges is not taken
+            result = refit_in_place(data, runner, Model(rest + [dict(other["model"].effects[-1])],
+                                                        dict(current["model"].parameters)), baseline)
+            if result is None:
                 continue
-            sims = runner.simulate(model)
-            if sims is None:
-                continue
-            result = gains(scored(data, {"effect": other["effect"], "where": other["where"], "model": model,
-                                         "n_params": _n_params(data, effects[-1]), "cost": cost, "free": free, "J": J}, sims),
-                           *baseline)
             if result["score"] > chosen["score"] + margin:  # the one replaced, its effect last (alternative_entry)
                 replaced = current["model"].effects[i]
                 tried.append(({**chosen, "model": Model(rest + [replaced], dict(chosen["model"].parameters))}, result))
@@ -227,6 +217,26 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
     return current, tried
 
 
-def _n_params(data: Data, effect: dict) -> int:
+def refit_in_place(data: Data, runner: Runner, trial: Model, baseline: tuple[dict, dict]) -> dict | None:
+    """`trial` (its last effect put in another's place) with every effect and the rig's parameters refit together on
+    the training blocks (POLISH_ITERATIONS of Levenberg-Marquardt), scored by validate.gains against `baseline` (the
+    fit_scores of the model without the one replaced, training and validation) as that last effect's result; None
+    where it diverges."""
+    free = effect_slots_of(data, trial) + rig_slots(data)
+    try:
+        model, cost, J = levenberg(in_noise(data, runner), trial, free, [value_of(trial, s) for s in free], None,
+                                   POLISH_ITERATIONS)
+    except Exception:  # noqa: BLE001 - a replacement that diverges is not taken
+        return None
+    sims = runner.simulate(model)
+    if sims is None:
+        return None
+    last = trial.effects[-1]
+    return gains(scored(data, {"effect": last["effect"], "where": last["where"], "model": model, "cost": cost,
+                               "free": free, "J": J, "n_params": parameter_count(data, last)}, sims), *baseline)
+
+
+def parameter_count(data: Data, effect: dict) -> int:
     """The fitted parameters of one effect."""
     return len(effect_slots_of(data, Model([effect])))
+
