@@ -10,6 +10,7 @@ One module per stage, each with its contract in its docstring:
   scan        scans of a ripple's period and of a shape parameter (a time constant): where a fit starts
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
   refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
+  laws        one friction law in the place of two found at one joint
   period      a ripple's period profiled: the cost with the rest re-solved at each period
   tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
   uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost, a
