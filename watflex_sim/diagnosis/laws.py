@@ -44,8 +44,8 @@ def one_law(data: Data, runner: Runner, current: dict, margin: float) -> tuple[d
     fewer). Returns the current result and (tried, chosen, the number of effects before the tried one's) for the
     report's alternatives."""
     tried = []
-    effects = current["model"].effects
-    for joint in sorted({e["where"] for e in effects if e["effect"] in CURVE_LAWS}):
+    for joint in sorted({e["where"] for e in current["model"].effects if e["effect"] in CURVE_LAWS}):
+        effects = current["model"].effects  # as an earlier joint's replacement left them
         pair = [i for i, e in enumerate(effects) if e["effect"] in CURVE_LAWS and e["where"] == joint]
         laws = [law for law in CURVE_LAWS if joint in data.rig.effects.get(law, ())
                 and law not in {effects[i]["effect"] for i in pair}]
@@ -84,9 +84,10 @@ def joint_speeds(data: Data, sims: list[Recording], joint: str) -> np.ndarray:
     for sim, motion in zip(sims, motions(data)):
         q = sim.channels.get(angle) if angle else None
         q = q if q is not None and np.isfinite(q).all() else (motion[1] if motion else None)
-        if q is not None and q.size > SPEED_WINDOW_S / np.median(np.diff(sim.time)):
-            dt = float(np.median(np.diff(sim.time)))  # a quantised encoder's steps smoothed over SPEED_WINDOW_S
-            pieces.append(savgol_filter(q, int(SPEED_WINDOW_S / dt) | 1, 2, deriv=1, delta=dt))
+        dt = float(np.median(np.diff(sim.time)))  # s
+        window = int(SPEED_WINDOW_S / dt) | 1  # samples, odd: a quantised encoder's steps smoothed over it
+        if q is not None and q.size > window:
+            pieces.append(savgol_filter(q, window, 2, deriv=1, delta=dt))
     v = np.concatenate(pieces) if pieces else np.zeros(0)
     v = v[np.abs(v) > 1e-9]
     return v[np.linspace(0, v.size - 1, min(v.size, CURVE_SPEEDS)).astype(int)] if v.size else v

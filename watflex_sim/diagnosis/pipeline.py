@@ -9,8 +9,8 @@ validation by MIN_HELD_GAIN, the noise floor then measured again with it in (ref
 hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each
 earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
 with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); backward
-elimination (a finding whose removal from the final model does not worsen validation is dropped); where no finding is left, the rig's parameters refit in the floors' units
-(refit.without_findings); 95 % intervals; alternatives within noise of the chosen one and,
+elimination (a finding whose removal from the final model does not worsen validation is dropped); where no finding is
+left, the rig's parameters refit in the floors' units (refit.without_findings); 95 % intervals; alternatives within noise of the chosen one and,
 when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),

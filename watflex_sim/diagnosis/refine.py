@@ -239,4 +239,3 @@ def refit_in_place(data: Data, runner: Runner, trial: Model, baseline: tuple[dic
 def parameter_count(data: Data, effect: dict) -> int:
     """The fitted parameters of one effect."""
     return len(effect_slots_of(data, Model([effect])))
-
