@@ -93,13 +93,13 @@ def joint_speeds(data: Data, sims: list[Recording], joint: str) -> np.ndarray:
     return v[np.linspace(0, v.size - 1, min(v.size, CURVE_SPEEDS)).astype(int)] if v.size else v
 
 
-def friction_curve(data: Data, model: Model, joint: str, speeds: np.ndarray, base: dict | None = None) -> np.ndarray:
+def friction_curve(data: Data, model: Model, joint: str, speeds: np.ndarray, base: dict) -> np.ndarray:
     """The sliding friction (N m or N; friction.exponential) of `joint` at `speeds` under `model`: the rig's joint
     friction (`base`, rig_frictions) with the model's refit parameters and effects applied."""
     patch = Patch()
     apply_parameters(patch, model.parameters, data.rig.parameter_knobs())
     apply_effects(patch, model.effects)
-    law = patched(rig_frictions(data) if base is None else base, patch.friction, patch.friction_add).get(joint)
+    law = patched(base, patch.friction, patch.friction_add).get(joint)
     if law is None:
         return np.zeros_like(speeds)
     return np.array([exponential(float(v), law.positive, law.negative) for v in speeds])
