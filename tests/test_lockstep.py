@@ -121,7 +121,7 @@ def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
     and joint friction makes one call per physics step (the laser arm: 10 a tick). Measured on one thread,
     1 s runs, lockstep / one by one, with the control half on arrays (columns.py): Watflex 1.13 at B = 4, 0.92
     at 6; the laser arm 1.02 at 4, 0.96 at 6; with hub friction 1.04 at 6, 0.95 at 8, 0.90 at 10. With each
-    member's own control half (an effect on it, here a sensor offset): Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from
+    member's own control half (an effect on it, here a sensor delay): Watflex 1.3-1.6 at B = 2-4, 0.83-0.92 from
     8; the laser arm with hub friction ~1 at 8-16, 0.75-0.83 at 32."""
     from watflex_sim.engine import ControlLoop
     from watflex_sim.lockstep import _pays
@@ -130,13 +130,13 @@ def test_small_groups_run_one_by_one_where_a_batch_would_not_pay():
         return [ControlLoop(load_scenario(name, ["duration_s=0.1", f"seed={i}", *sets])) for i in range(n)]
 
     coulomb = "{effect='coulomb_friction', where='hub', torque_positive=0.02, torque_negative=0.03}"
-    offset = "{effect='sensor_offset', where='hub_angle', offset=0.001}"
+    delay = "{effect='delay', where='hub_angle', seconds=0.002}"
     assert _pays(loops("watflex_elbow_step", 6)) and not _pays(loops("watflex_elbow_step", 4))
     assert _pays(loops("laser_arm_step", 6)) and not _pays(loops("laser_arm_step", 4))
     assert not _pays(loops("laser_arm_step", 8, [f"effects=[{coulomb}]"]))
     assert _pays(loops("laser_arm_step", 10, [f"effects=[{coulomb}]"]))
-    assert not _pays(loops("laser_arm_step", 16, [f"effects=[{coulomb}, {offset}]"]))
-    assert _pays(loops("laser_arm_step", 30, [f"effects=[{coulomb}, {offset}]"]))
+    assert not _pays(loops("laser_arm_step", 16, [f"effects=[{coulomb}, {delay}]"]))
+    assert _pays(loops("laser_arm_step", 30, [f"effects=[{coulomb}, {delay}]"]))
 
 
 @pytest.fixture
@@ -183,15 +183,15 @@ def test_a_diagnosis_resimulation_batch_runs_on_arrays_and_matches_single_runs(b
 
 
 def test_members_with_a_control_half_of_their_own_run_apart_and_the_rest_on_arrays(built):
-    """simulate_batch: a resimulation batch where some members carry an effect on the control half (here a sensor
-    offset, as the diagnosis' signature probes do) has those run apart, not the whole group on per-member
-    control (a Watflex signature batch spent 18 s of 33 in per-member control that way, 6 s in physics); every
-    member still equals its run alone."""
+    """simulate_batch: a resimulation batch where some members carry an effect on the control half that has no
+    column form (here a sensor delay, as the diagnosis' signature probes do) has those run apart, not the whole group
+    on per-member control (a Watflex signature batch spent 18 s of 33 in per-member control that way, 6 s in
+    physics); every member still equals its run alone."""
     from watflex_sim.resim import resimulate, resimulate_many
 
     rec = simulate(load_scenario("laser_arm_step", ["duration_s=0.5", "seed=4"])).recording
-    offset = [{"effect": "sensor_offset", "where": "hub_angle", "offset": 1e-3}]
-    jobs = [(rec, [], {"beam_EI": r}) for r in (0.97, 0.99, 1.0, 1.01, 1.02, 1.04)] + [(rec, offset, {})]
+    delay = [{"effect": "delay", "where": "hub_angle", "seconds": 0.002}]
+    jobs = [(rec, [], {"beam_EI": r}) for r in (0.97, 0.99, 1.0, 1.01, 1.02, 1.04)] + [(rec, delay, {})]
     together = resimulate_many(jobs, nthread=1)
     assert len(built) == 1 and built[0] is not None  # the six plain members, on arrays; the seventh alone
     for job, sim in zip(jobs, together):
@@ -199,10 +199,35 @@ def test_members_with_a_control_half_of_their_own_run_apart_and_the_rest_on_arra
         assert all(np.array_equal(sim.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels), job[1:]
 
 
+def test_sensor_and_actuator_gains_offsets_and_limits_run_on_arrays_and_match_single_runs(built):
+    """columns.Patches: members with a sensor gain or offset (on a channel the controller reads and on one it does not)
+    or an actuator gain, offset or limit, beside members without, run on arrays and equal their single runs bit for
+    bit. The laser arm's refit tip-sensor gain (rigs/laser_arm.toml) is such a sensor gain on every model a diagnosis
+    simulates: until it had a column form every laser diagnosis batch ran per-member control."""
+    laser = ["{effect='sensor_gain', where='tip_sensor', ratio=1.013}",
+             "{effect='sensor_offset', where='motor_current', offset=0.003}",
+             "{effect='actuator_gain', where='voltage_cmd', ratio=0.93}, {effect='current_saturation', where='voltage_cmd', limit=0.5}",
+             "{effect='actuator_offset', where='voltage_cmd', offset=0.05}"]
+    watflex = ["{effect='sensor_gain', where='strain_2A', ratio=-1.0}",
+               "{effect='sensor_offset', where='elbow_angle', offset=0.002}",
+               "{effect='actuator_gain', where='elbow_torque_cmd', ratio=1.1}, {effect='actuator_offset', "
+               "where='elbow_torque_cmd', offset=0.4}, {effect='current_saturation', where='elbow_torque_cmd', limit=0.3}"]
+    for name, effects in (("laser_arm_step", laser), ("watflex_elbow_step", watflex)):
+        built.clear()
+        scenarios = [load_scenario(name, ["duration_s=0.5", "seed=1"])]
+        scenarios += [load_scenario(name, ["duration_s=0.5", "seed=1", f"effects=[{e}]"]) for e in effects]
+        results = _compare(scenarios)
+        assert len(built) == 1 and built[0] is not None, name  # one batch, on arrays
+        plain = results[0].recording.channels
+        assert all(not all(np.array_equal(plain[c], r.recording.channels[c], equal_nan=True) for c in plain)
+                   for r in results[1:]), name  # each effect really acts
+
+
 @pytest.mark.parametrize("noise_seed", [None, 7])
 @pytest.mark.parametrize("rig, path, name, ratios", [
     ("quanser_2dsfl", "quanser_2dsfl/data_fsf_th11.mat", "link2_stiffness", [0.92, 0.96, 1.0, 1.02, 1.05, 1.08]),
     ("emps", "emps/DATA_EMPS.mat", "mass", [0.8, 0.9, 1.0, 1.1, 1.2, 1.25]),
+    ("emps", "emps/DATA_EMPS.mat", "drive_gain", [0.98, 0.99, 1.0, 1.01, 1.015, 1.02]),  # an actuator gain (Patches)
 ])
 def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(built, rig, path, name, ratios, noise_seed):
     """columns.GenericColumns: a rig described as data (rigs/quanser_2dsfl.toml: link strains as hinge sums,

@@ -10,10 +10,11 @@ form (`columns` of PID, StateFeedback and OpenLoop, in controllers/), the refere
 columns. Where the single run calls math.atan2 it is called here too (numpy's arctan2 differs in the
 last bit for ~0.6 % of arguments).
 
-`ColumnControl.of` gives None where a member needs what has no column form - another controller
-(observer, passivity, fuzzy PD, PI velocity, friction compensation), an effect on the control half
-(sensor or actuator gain, offset, limit; delays), control jitter - and lockstep then runs each
-member's own control half.
+Effects on the control half that act sample by sample - a sensor's gain and offset, an actuator's gain, offset
+and limit (engine.ControlLoop.control; a refit rig's `sensor_gain` / `actuator_gain` knobs, the diagnosis' effects)
+- are applied here too, on the members that have them (`Patches`). `ColumnControl.of` gives None where a member
+needs what has no column form - another controller (observer, passivity, fuzzy PD, PI velocity, friction
+compensation), a delay (sensor or command), control jitter - and lockstep then runs each member's own control half.
 """
 from __future__ import annotations
 
@@ -249,19 +250,57 @@ class GrowthColumns:
 FORMS = {LaserArmRig: LaserColumns, WatflexRig: WatflexColumns, GenericRig: GenericColumns}
 
 
+class Patches:
+    """The members' sensor gains and offsets and actuator gains, offsets and limits (effects.Patch) on arrays, where
+    any member has one: engine.ControlLoop's `_sense` and `_actuators` arithmetic, applied only to the members that
+    carry the effect (np.where: the others' values untouched, bit for bit). Until 2026-12-03 a patch sent its whole
+    batch to per-member control, and the laser arm's refit `tip_sensor_gain` (a sensor gain on every model a
+    diagnosis simulates) sent every laser diagnosis batch there (seed 79's laser_arm-3ae9b37c: 561 of 720
+    simulations; 30 re-simulations of 6 s on one thread: 7.96 s with the gain, 6.60 s without, now 6.80 s)."""
+
+    def __init__(self, loops: list, ctrl: np.ndarray):
+        self.ctrl = ctrl
+        self.sensor = {c: self._columns(loops, lambda loop, c=c: loop.patch.sensor.get(c), (1.0, 0.0))
+                       for c in sorted({c for loop in loops for c in loop.patch.sensor})}
+        first = loops[0].rig
+        self.actuator = {c: (first.command_actuators[c], first.command_scale.get(c, 1.0),
+                             self._columns(loops, lambda loop, c=c: loop.patch.actuator.get(c), (1.0, 0.0, math.inf)))
+                         for c in sorted({c for loop in loops for c in loop._actuators})}
+
+    @staticmethod
+    def _columns(loops: list, value, neutral: tuple) -> tuple[np.ndarray, ...]:
+        """(mask of the members that have it, then each of its numbers per member, `neutral` where absent)."""
+        rows = [value(loop) for loop in loops]
+        numbers = [np.array([neutral[j] if r is None else r[j] for r in rows], dtype=float) for j in range(len(neutral))]
+        return (np.array([r is not None for r in rows]), *numbers)
+
+    def sense(self, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Sensor gain and offset on the measured channels in `values`."""
+        for channel, (mask, gain, offset) in self.sensor.items():
+            if channel in values:
+                values[channel] = np.where(mask, values[channel] * gain + offset, values[channel])
+        return values
+
+    def act(self) -> None:
+        """Actuator gain, offset and limit on the plant inputs, in the command's unit."""
+        for actuator, scale, (mask, gain, offset, limit) in self.actuator.values():
+            u = self.ctrl[:, actuator] / scale * gain + offset
+            self.ctrl[:, actuator] = np.where(mask, scale * np.maximum(-limit, np.minimum(limit, u)), self.ctrl[:, actuator])
+
+
 class ColumnControl:
     """The control half of a batch's loops (lockstep._Lockstep) on arrays; `tick(k)` does what each loop's
     `control(k)` and its Tape's `write` would, and leaves the plant inputs in the batch's `ctrl`."""
 
     @staticmethod
     def fits(loops: list) -> bool:
-        """Whether these loops (one structure) may have a column form: a rig with one, no effect on the control
+        """Whether these loops (one structure) may have a column form: a rig with one, no delay on the control
         half, no jitter, a controller type with a `columns` form (which may still find its members unlike)."""
         first = loops[0]
         form = FORMS.get(type(first.rig))
         if form is None or any(type(loop.rig) is not type(first.rig) for loop in loops):
             return False
-        if any(loop.patch.sensor or loop._sensor_fifo or loop._commands or loop._actuators or loop.delays is not None
+        if any(loop._sensor_fifo or loop._commands or loop.delays is not None
                or loop.period != first.period or loop.rig.channels != first.rig.channels
                or set(loop.references.columns) != set(first.references.columns)
                or not np.array_equal(loop.monitor.dofs, first.monitor.dofs) for loop in loops):
@@ -289,12 +328,15 @@ class ColumnControl:
         self.names = loops[0].rig.channels
         self.table = np.full((n, len(self.names), len(loops)), math.nan)  # (tick, channel, member)
         self.growth = GrowthColumns([loop.monitor for loop in loops], arrays["qvel"])
+        self.patches = Patches(loops, arrays["ctrl"])
 
     def tick(self, k: int) -> None:
         """Sensors, controller, converters of control period k for every member; the recording's row k."""
-        obs = self.rig.observe(k, {c: table[k] for c, table in self.refs.items()})
+        obs = self.patches.sense(self.rig.observe(k, {c: table[k] for c, table in self.refs.items()}))
         command = self.law(k * self.period, obs)
-        values = obs | self.rig.actuate(command) | self.rig.monitor(k)
+        recorded = self.rig.actuate(command)
+        self.patches.act()
+        values = obs | recorded | self.patches.sense(self.rig.monitor(k))
         row = self.table[k]
         for j, name in enumerate(self.names):
             if name in values:
