@@ -31,7 +31,8 @@ from .explain import finding
 from .fitting import value_of
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .laws import one_law
-from .refine import alternative_entry, carry_on, offset_alternative, polish, single_from_pair, swap_earlier
+from .refine import (alternative_entry, carry_on, offset_alternative, polish, restart_earlier, single_from_pair,
+                     swap_earlier)
 from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, floors_after_dropping, held_without,
                     keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training, without_findings)
 from .runner import Runner, evaluator, in_units
@@ -39,7 +40,7 @@ from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candid
                         signatures, with_findings)
 from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
 from .uncertainty import final_intervals
-from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, rival, shortfall,
+from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, near_place, rival, shortfall,
                        vague_findings, verdict_of, verdict_reason, within_noise)
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
@@ -192,6 +193,15 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                     say("verdict", "asymmetric Coulomb friction is better explained as symmetric friction plus an actuator offset")
                     best, alternative = alternative, best
                 fitted.append(alternative)  # the explanation not taken competes as an alternative below
+        if near_place(best, later):  # short only of the excess a later finding must remove: the earlier ones restarted
+            say("candidate fits", f"round {round_}: {best['effect']} at {best['where']} fitted again with the earlier "
+                "findings' sizes restarted a decade away")
+            cand = [c for c in top if (c.effect, c.where) == (best["effect"], best["where"])][:1]
+            restarted = restart_earlier(data, current, lambda base: [
+                judge(scored(data, r, r["sims"])) for r in fit_candidates(data, runner, base, cand, rig_columns,
+                                                                          FIT_ITERATIONS, per) if "error" not in r])
+            if restarted is not None and earns_place(restarted, later):
+                best = restarted
         if not earns_place(best, later):  # judged on the final (polished) model, never on a promise
             rejected.append({"effect": best["effect"], "where": best["where"], "train_gain": best["train_gain"],
                              "held_out_gain": best["held_gain"], "excess_gain": best["excess_gain"],

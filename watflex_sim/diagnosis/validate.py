@@ -30,6 +30,7 @@ from .tolerance import knob_partner
 MIN_HELD_GAIN = 0.01  # and the validation noise ratio by this fraction (data the fit did not see)
 NOISE_MARGIN = 1.3  # within this factor of the noise, a model leaves nothing to explain
 MIN_EXCESS_GAIN = 0.25  # a later effect must remove at least this share of the validation residual above the noise
+NEAR_SHARE = 0.5  # a later effect that removes this share of MIN_EXCESS_GAIN is tried with the earlier ones restarted
 EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
 CURVE_VARIANCE = 0.2  # a static curve of a channel's own value that takes this much of its residual's variance
 # (in noise variances), or is this far beyond its own sampling spread (CURVE_SIGNIFICANCE) ...
@@ -72,6 +73,14 @@ def excess_gain(held_now: dict, held_new: dict) -> float:
 def earns_place(result: dict, later: bool) -> bool:
     """Whether a fitted candidate earns its place (shortfall says nothing against it)."""
     return not shortfall(result, later)
+
+
+def near_place(result: dict, later: bool) -> bool:
+    """Whether a later candidate that does not earn its place falls short only of the excess a later finding must
+    remove, having removed NEAR_SHARE of it (refine.restart_earlier is then tried)."""
+    if earns_place(result, later) or not later or "local_gain" in result:
+        return False
+    return earns_place(result, False) and result["excess_gain"] >= NEAR_SHARE * MIN_EXCESS_GAIN
 
 
 def rival(result: dict, chosen: dict, later: bool, absorbable: float) -> bool:
