@@ -6,7 +6,9 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
 validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
-hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); each
+hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); a later
+candidate short only of the excess it must remove fitted again with the earlier findings' sizes restarted
+(refine.restart_earlier: two effects that each fit worse alone than neither); each
 earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
 with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); backward
 elimination (a finding whose removal from the final model does not worsen validation is dropped); where no finding is
