@@ -2008,7 +2008,7 @@ def test_two_friction_laws_at_one_joint_give_way_to_one_that_scores_better(monke
     monkeypatch.setattr(refine, "rig_slots", lambda data: [])
     for module in (laws, refine):
         monkeypatch.setattr(module, "parameter_count", lambda data, effect: {"stribeck_friction": 3}.get(effect["effect"], 2))
-        monkeypatch.setattr(module, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
+    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
     monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
                                                                       "held_out": {"noise_ratio": sims}})
     monkeypatch.setattr(laws, "joint_speeds", lambda data, sims, joint: np.zeros(0))

@@ -14,7 +14,7 @@ import numpy as np
 
 from . import __version__
 from .effects import Patch, apply_effects, apply_parameters
-from .joint_friction import FrictionCallback, configure, nominal_frictions, patched
+from .joint_friction import FrictionCallback, patched, scenario_frictions
 from .model import ConfigError, load_model
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
@@ -255,10 +255,9 @@ class ControlLoop:
             if not hasattr(self.rig, "start_at"):
                 raise ConfigError(f"rig {rig_name!r} cannot start from recorded values (its sensors are not generic)")
             self.rig.start_at(scenario["initial"])
-        frictions = nominal_frictions(description) if scenario["friction"] == "nominal" else {}
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
-        frictions = patched(configure(frictions, scenario["joint_friction"]), patch.friction, patch.friction_add)
+        frictions = patched(scenario_frictions(description, scenario), patch.friction, patch.friction_add)
         self.friction = FrictionCallback(self.model, self.data, frictions)
         self.controller = make_controller(scenario, description, period)
         reads = getattr(self.controller, "channels", None)  # a law on named channels says which it reads

@@ -69,6 +69,12 @@ def nominal_frictions(rig) -> dict[str, JointFriction]:
             for joint in ("shoulder", "elbow") if hasattr(params, f"{joint}_friction")}
 
 
+def scenario_frictions(rig, scenario: dict) -> dict[str, JointFriction]:
+    """A checked scenario's joint friction before effects: the rig's nominal laws (friction 'nominal'; none for
+    'none') with its `joint_friction` table applied (`configure`)."""
+    return configure(nominal_frictions(rig) if scenario["friction"] == "nominal" else {}, scenario["joint_friction"])
+
+
 def configure(base: dict[str, JointFriction], overrides: dict) -> dict[str, JointFriction]:
     """Apply a scenario's `joint_friction` table ({joint: {field: value, positive: {alpha0: ..}}}).
 

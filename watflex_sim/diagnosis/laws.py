@@ -13,11 +13,11 @@ from scipy.signal import savgol_filter
 
 from ..effects import Patch, apply_effects, apply_parameters
 from ..friction import exponential
-from ..joint_friction import configure, nominal_frictions, patched
+from ..joint_friction import patched, scenario_frictions
 from ..recording import Recording
 from ..resim import scenario_from_recording
-from .data import Data, Model, fit_scores, motions
-from .refine import parameter_count, refit_in_place
+from .data import Data, Model, motions
+from .refine import parameter_count, refit_in_place, scores_without
 from .runner import Runner
 from .screening import make_candidate
 from .validate import gains
@@ -53,10 +53,9 @@ def one_law(data: Data, runner: Runner, current: dict, margin: float) -> tuple[d
             continue
         rest = [e for i, e in enumerate(effects) if i not in pair]
         parameters = dict(current["model"].parameters)
-        without = runner.simulate(Model(rest, parameters))
-        if without is None:
+        baseline = scores_without(data, runner, Model(rest, parameters))
+        if baseline is None:
             continue
-        baseline = (fit_scores(data, without, "train"), fit_scores(data, without, "held_out"))
         chosen = gains({**current, "effect": effects[pair[-1]]["effect"], "where": joint,
                         "n_params": sum(parameter_count(data, effects[i]) for i in pair)}, *baseline)
         speeds = joint_speeds(data, current["sims"], joint)
@@ -107,9 +106,7 @@ def friction_curve(data: Data, model: Model, joint: str, speeds: np.ndarray, bas
 
 def rig_frictions(data: Data) -> dict:
     """The rig's joint friction laws (joint_friction.JointFriction) as the first recording's scenario sets them."""
-    scenario = scenario_from_recording(data.recordings[0], data.rig)
-    base = nominal_frictions(data.rig) if scenario.get("friction", "nominal") == "nominal" else {}
-    return configure(base, scenario.get("joint_friction", {}))
+    return scenario_frictions(data.rig, scenario_from_recording(data.recordings[0], data.rig))
 
 
 def curve_start(data: Data, model: Model, rest: list[dict], law: str, joint: str, speeds: np.ndarray) -> dict:

@@ -196,10 +196,9 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
             continue
         i = places.index((winner["effect"], winner["where"]))
         rest = [e for j, e in enumerate(current["model"].effects) if j != i]  # the later findings (and any other)
-        without = runner.simulate(Model(rest, dict(current["model"].parameters)))
-        if without is None:
+        baseline = scores_without(data, runner, Model(rest, dict(current["model"].parameters)))
+        if baseline is None:
             continue
-        baseline = (fit_scores(data, without, "train"), fit_scores(data, without, "held_out"))
         chosen = gains({**current, "effect": winner["effect"], "where": winner["where"],
                         "n_params": parameter_count(data, current["model"].effects[i])}, *baseline)
         others = [r for r in runners_up if len(r["model"].effects) == len(winner["model"].effects)
@@ -240,6 +239,13 @@ def restart_earlier(data: Data, current: Model, fit) -> dict | None:
                 if best is None or out["score"] > best["score"]:
                     best = out
     return best
+
+
+def scores_without(data: Data, runner: Runner, rest: Model) -> tuple[dict, dict] | None:
+    """fit_scores (training, validation) of `rest`, the current model without the findings to be replaced: what a
+    replacement is scored against (validate.gains); None where it diverges."""
+    sims = runner.simulate(rest)
+    return None if sims is None else (fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out"))
 
 
 def refit_in_place(data: Data, runner: Runner, trial: Model, baseline: tuple[dict, dict]) -> dict | None:
