@@ -337,7 +337,7 @@ def test_a_current_channel_names_a_datasheet_drive(tmp_path, edit, why):
 
 @pytest.mark.parametrize("drive", ["current", "voltage"])
 def test_the_diagnosis_measures_effort_in_newton_metres(tmp_path, monkeypatch, drive):
-    """A friction level is sized from the peak actuator torque (diagnosis.data.scale_of, "effort"): on
+    """A friction level is sized from the peak actuator torque (diagnosis.motion.scale_of, "effort"): on
     a current drive the command channel's gain (eta Kt Kg = 0.8 x 0.1 x 50 = 4 N m/A); on a voltage
     drive, whose channel gain is 1 (V into the motor), the model's stall torque per volt
     eta Kg Km / R = 1 x 50 x 0.1 / 1.5 = 3.333 N m/V. Taking the volts for N m made the friction

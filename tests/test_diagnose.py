@@ -277,7 +277,7 @@ def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     0.8 it stays (nothing gains more than 1). r(m) = r0 |1 - m / 3.2| from 0.2: 0.4, 0.8 (FURTHER_STEPS = 2), then
     searched up to twice that, 1.6: gain 1 - 0.5^2."""
     from watflex_sim.diagnosis import Candidate, Model, Slot
-    from watflex_sim.diagnosis.screening import ALONG_TOLERANCE, FURTHER_STEPS, rescreen
+    from watflex_sim.diagnosis.rescreen import ALONG_TOLERANCE, FURTHER_STEPS, rescreen
 
     r0 = np.ones(10)
     law = {"closer": lambda m: r0 * (1 - m / 0.4) ** 2, "further": lambda m: r0 * (1 + m), "far": lambda m: r0 * abs(1 - m / 3.2)}
@@ -304,7 +304,7 @@ def test_rescreen_finds_a_basin_between_two_moves():
     (1 - 0.616^2); searched between 0.1 and 0.4 (search_along), the estimate is the basin's 0.27 (gain 1 - 0.2^2),
     to ALONG_TOLERANCE x 0.1."""
     from watflex_sim.diagnosis import Candidate, Model, Slot
-    from watflex_sim.diagnosis.screening import ALONG_TOLERANCE, rescreen
+    from watflex_sim.diagnosis.rescreen import ALONG_TOLERANCE, rescreen
 
     r0 = np.ones(10)
     cand = Candidate("basin", "x", {"m": 0.2}, {"m": Slot(("effect", -1, "m"), -10.0, 10.0)}, {"m": 0.0},
@@ -322,7 +322,7 @@ def test_rescreen_finds_a_far_basin_on_the_ladder():
     flat; the ladder's rungs are 1.3^k, k = -7..7 (LADDER_REACH 8), and the rung 1.3^-5 = x0.269 has the largest gain,
     1 - (1 - 0.9 exp(-(ln(0.269 / 0.25) / 0.15)^2))^2: the estimate goes there."""
     from watflex_sim.diagnosis import Candidate, Model, Slot
-    from watflex_sim.diagnosis.screening import LADDER_RATIO, ladder, rescreen
+    from watflex_sim.diagnosis.rescreen import LADDER_RATIO, ladder, rescreen
 
     r0 = np.ones(10)
     law = lambda m: r0 * (1 - 0.9 * math.exp(-((math.log(m / 0.25) / 0.15) ** 2)))  # noqa: E731
@@ -343,7 +343,8 @@ def test_rescreen_simulates_a_switch_candidate_between_its_levels():
     there 1 - 1.5^2 = -1.25, at 0.080 / sqrt(10) = 0.0253 the gain is 1 - (1 - 0.95 exp(-(ln(0.0253 / 0.023) /
     0.3)^2))^2 = 0.989 and the estimate goes there; a candidate with a neutral value gets no such points."""
     from watflex_sim.diagnosis import Candidate, Model, Slot
-    from watflex_sim.diagnosis.screening import SWITCH_LEVELS, between_levels, rescreen
+    from watflex_sim.diagnosis.rescreen import between_levels, rescreen
+    from watflex_sim.diagnosis.screening import SWITCH_LEVELS
 
     r0 = np.ones(10)
     law = lambda w: r0 * (1 - 0.95 * math.exp(-((math.log(w / 0.023) / 0.3) ** 2))) + 0.5 * r0 * (w > 0.05)  # noqa: E731

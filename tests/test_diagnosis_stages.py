@@ -314,7 +314,7 @@ def test_the_sweep_on_the_menu_spans_the_recorded_excursion_and_band(laser_recor
 def test_one_channel_above_its_noise_is_not_within_noise(laser_recordings):
     """Issue 14's false all-clear: a motor-current error of 1.5 x its noise on one of four channels
     leaves the mean noise ratio near 1.1 (< 1.3) but must not pass as 'within noise'."""
-    from watflex_sim.diagnosis.data import fit_scores
+    from watflex_sim.diagnosis.scores import fit_scores
     from watflex_sim.diagnosis.validate import within_noise
 
     data = prepare(laser_recordings, ["a", "b"])
@@ -338,7 +338,7 @@ def test_a_channel_whose_floor_is_our_discretisation_is_judged_by_its_upper_esti
     window's local null does): with 0.8 of a noise n our discretisation, the floor alone is n sqrt(1 + 3 x 0.64) =
     1.709 n (closed form), so a motor-current misfit of 1.5 n sits at 0.88 x (within), one of 3 n at 1.76 x (not);
     the mean over channels still divides by n. A channel without a discretisation part is judged as before."""
-    from watflex_sim.diagnosis.data import fit_scores
+    from watflex_sim.diagnosis.scores import fit_scores
     from watflex_sim.diagnosis.validate import within_noise
 
     data = prepare(laser_recordings, ["a", "b"])
@@ -570,7 +570,8 @@ def test_the_refit_cost_sees_a_precise_channel_off_its_noise():
     in noise units, what the verdict judges and the refit now minimises, it costs 40 % more."""
     from scipy.optimize import brentq
 
-    from watflex_sim.diagnosis.data import channel_ratios, residual_vector, unit_change
+    from watflex_sim.diagnosis.data import residual_vector, unit_change
+    from watflex_sim.diagnosis.scores import channel_ratios
 
     data, simulate_ = _camera_and_strain()
     strain = lambda k: [r["ratio"] for r in channel_ratios(data, simulate_(Model(parameters={"k": k})), "train")  # noqa: E731
@@ -606,7 +607,8 @@ def test_the_refit_compass_goes_on_until_the_noise_resolves_no_step():
     (the nominal model) reaches the truth to 2e-5, the strain bridge within 1.01 x its noise; 6 sweeps (the
     search before) halve the step to 0.4 % of the tolerance and leave it at 3.0 x (on watflex-4cecc0b4:
     link2_EI 0.97947 against 0.9791, strain_2A 1.32 x; now 0.9791, nothing_missing)."""
-    from watflex_sim.diagnosis.data import channel_ratios, residual_vector
+    from watflex_sim.diagnosis.data import residual_vector
+    from watflex_sim.diagnosis.scores import channel_ratios
     from watflex_sim.diagnosis.fitting import compass
     from watflex_sim.diagnosis.refit import CHI2_RESOLUTION, COMPASS_SWEEPS
 
@@ -1096,11 +1098,11 @@ def test_a_slice_follows_a_valley_where_the_others_can_move():
 
 
 def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
-    """effects.canonical / pipeline._canonical: a sin(2 pi q / P + phase) = (-a) sin(2 pi q / P + phase +- pi), so a
+    """effects.canonical / explain.canonical_form: a sin(2 pi q / P + phase) = (-a) sin(2 pi q / P + phase +- pi), so a
     fit may land on either; the report gives a >= 0 with the phase in (-pi, pi], intervals moved with them. Seed 47,
     watflex-db692a60: truth 0.5745 N m at -2.300 rad, found -0.5600 at 0.8635 (scored 84 % off; the same torque at
     every angle)."""
-    from watflex_sim.diagnosis.pipeline import _canonical
+    from watflex_sim.diagnosis.explain import canonical_form
     from watflex_sim.effects import canonical
 
     found = {"effect": "position_dependent_friction", "where": "elbow", "amplitude": -0.56001, "period": 1.38019,
@@ -1110,7 +1112,7 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     torque = lambda e, q: e["amplitude"] * math.sin(2 * math.pi * q / e["period"] + e["phase"]) + e["spring"] * q  # noqa: E731
     for q in np.linspace(-1.0, 1.0, 9):
         assert torque(same, q) == pytest.approx(torque(found, q), abs=1e-12)
-    model, ranges = _canonical(Model([found]), {0: {"amplitude": (-0.5654, -0.5546), "phase": (0.8446, 0.8824),
+    model, ranges = canonical_form(Model([found]), {0: {"amplitude": (-0.5654, -0.5546), "phase": (0.8446, 0.8824),
                                                      "spring": (-0.045, -0.025)}})
     assert model.effects[0] == same
     assert ranges[0]["amplitude"] == (0.5546, 0.5654) and ranges[0]["spring"] == (-0.045, -0.025)
@@ -1119,7 +1121,7 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     positive = dict(found, amplitude=0.3)
     assert canonical(positive) is positive
     quarter = dict(found, phase=-math.pi / 2)  # shifted to +pi/2 = -phase: moved by pi, not mirrored
-    assert _canonical(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))
+    assert canonical_form(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))
 
 
 def _ripple_slots(motion: float) -> dict:
@@ -1606,7 +1608,7 @@ def test_motion_is_the_reference_where_no_measured_joint_moves():
     (shoulder_angle at rest)", read off the locked shoulder's encoder. With no measured position moving a
     tenth as far as a reference, the moving reference is the motion: a 0.5 rad elbow step at 1 s moves
     "positive" during its rise, and rests after it. With the elbow encoder there, the encoder is."""
-    from watflex_sim.diagnosis.data import motion_channel
+    from watflex_sim.diagnosis.motion import motion_channel
     from watflex_sim.diagnosis.locate import regimes
     from watflex_sim.recording import Recording
     from watflex_sim.rigdesc import load_rig
@@ -1623,14 +1625,14 @@ def test_motion_is_the_reference_where_no_measured_joint_moves():
 
 
 def test_where_the_moving_joints_encoder_is_not_recorded_its_motion_is_simulated():
-    """data.motions: with the elbow encoder left out the motion is the stepped elbow reference, whose robust peak
+    """motion.motions: with the elbow encoder left out the motion is the stepped elbow reference, whose robust peak
     rate is ~0 (seed 73's watflex-349124fc: an elbow viscous friction sized by scale_of's "effort/speed" at
     +-1e15 N m s/rad, never screened; every window "at rest"). The elbow as the nominal model moves it is used
     instead, and it is what the encoder records: the same noise-free recording with and without the encoder gives
     the same viscous scale (to 1e-9: one simulation; ~1 rad/s for a 0.5 rad step) and the same regime words
     around the elbow's fastest sample."""
     from watflex_sim.diagnosis import scale_of
-    from watflex_sim.diagnosis.data import motion_channel, motions, peak, peak_speed
+    from watflex_sim.diagnosis.motion import motion_channel, motions, peak, peak_speed
     from watflex_sim.diagnosis.locate import regimes
     from watflex_sim.effects import CATALOGUE
     from watflex_sim.recording import Recording
@@ -1679,7 +1681,7 @@ def test_a_misfit_at_one_transient_is_not_within_the_noise():
     leaves no window above LOCAL_MARGIN (100-sample windows: chance ~1.4 x at most), nor does a bump of 9 x the noise
     where the model's own discretisation changes it by 2 x: counted DISCRETISATION_COUNT = 2 times, the local null is
     1 + (2 x 2)^2 = 17 noise variances, the window sqrt(82 / 17) = 2.2 x (counted once: sqrt(82 / 5) = 4.05 x, flagged)."""
-    from watflex_sim.diagnosis.data import fit_scores
+    from watflex_sim.diagnosis.scores import fit_scores
     from watflex_sim.diagnosis.locate import LOCAL_MARGIN, local_excess, local_gain, local_ratio
     from watflex_sim.diagnosis.validate import verdict_of, within
 

@@ -2,16 +2,20 @@
 
 One module per stage, each with its contract in its docstring:
   data        recordings in a canonical order, channels, spreads, noise, the train/validation blocks
+  scores      NRMSE, correlation and ratios to the noise of a model's simulations, per channel and on the whole
+  motion      what moves in the recordings; the sizes catalogue parameters are measured in
   runner      re-simulation jobs in worker processes
   fitting     Levenberg-Marquardt on bounded slots, 95 % intervals
   refit       the nominal model re-simulated, the rig's parameters refit, what noise and discretisation leave
   screening   candidate effects, their signatures, the screening and the shortlist
+  rescreen    the best-screening candidates checked by simulation at their linear estimates
   effect_fit  the fit of one candidate effect (a quantised step's search; from a scan's start too)
   scan        scans of a ripple's period and of a shape parameter (a time constant): where a fit starts
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
   refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
   laws        one friction law in the place of two found at one joint
   period      a ripple's period profiled: the cost with the rest re-solved at each period
+  level       a shape or quantised parameter profiled likewise (a time constant, a Stribeck velocity, a delay)
   tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
   uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost, a
               ripple's period profile)
@@ -20,8 +24,9 @@ One module per stage, each with its contract in its docstring:
   experiment  the experiment that would separate explanations the data cannot
   pipeline    the stages in order and the report
 """
-from .data import (Data, Model, fit_scores, motion_channel, noise_nrmse, noise_ratio, prepare, residual_vector,
-                   scale_of)
+from .data import Data, Model, prepare, residual_vector
+from .motion import motion_channel, scale_of
+from .scores import fit_scores, noise_nrmse, noise_ratio
 from .effect_fit import step_search
 from .fitting import Slot, intervals, levenberg, refit_parameters
 from .locate import locate

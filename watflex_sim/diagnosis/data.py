@@ -6,7 +6,7 @@ Contract: `prepare(recordings, names)` returns the same `Data` whatever order th
 even blocks train the fits, odd blocks validate them, so every regime the data has (directions,
 payloads, rest, saturation, reversals) is judged on samples the fit did not see. Residuals are in
 two units: the channel's spread (what the screening compares, `residual_vector`) and the channel's noise
-(what fits minimise and verdicts judge, `unit_change`, `noise_ratio`: 1 = the model is as close as the
+(what fits minimise and verdicts judge, `unit_change`, scores.noise_ratio: 1 = the model is as close as the
 noise allows).
 """
 from __future__ import annotations
@@ -17,11 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine import SimulationError, simulate
-from ..metrics import correlation, nrmse
 from ..model import ConfigError
 from ..recording import Recording
-from ..resim import scenario_from_recording
 from ..rigdesc import RigDescription, load_rig
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
@@ -42,6 +39,10 @@ class Model:
 
     effects: list[dict] = field(default_factory=list)
     parameters: dict[str, float] = field(default_factory=dict)
+
+    def places(self) -> tuple:
+        """The effects as (effect, place) pairs, in order: which physics the model has, whatever the numbers."""
+        return tuple((e["effect"], e["where"]) for e in self.effects)
 
 
 @dataclass
@@ -260,22 +261,6 @@ def unit_change(data: Data, part: str = "train", stride: int = STRIDE, sims: lis
     return np.concatenate(pieces) if pieces else np.zeros(1)
 
 
-def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list[dict]:
-    """Per recording and channel: RMS residual / noise rms on a part (1 = within the noise), and (`alone`) / the
-    noise with our discretisation error counted DISCRETISATION_COUNT times: what the channel is judged by on its own."""
-    out = []
-    for i, (rec, sim, name, chans, noise, train) in enumerate(zip(data.recordings, sims, data.names, data.channels,
-                                                                  data.noise, data.train)):
-        mask = in_part(train, part)
-        for c in chans:
-            rms = rms_residual(rec, sim, c, mask, least=10)
-            if rms is not None:
-                step = data.discretisation[i].get(c, 0.0) if data.discretisation else 0.0
-                alone = math.sqrt(noise[c] ** 2 + (DISCRETISATION_COUNT**2 - 1.0) * step**2)
-                out.append({"recording": name, "channel": c, "ratio": rms / noise[c], "alone": rms / alone})
-    return out
-
-
 def rms_residual(rec: Recording, sim: Recording, channel: str, mask: np.ndarray, least: int = 1) -> float | None:
     """RMS of simulated - measured on `channel` over `mask`'s finite samples (the channel's unit); None
     with fewer than `least` of them."""
@@ -284,148 +269,3 @@ def rms_residual(rec: Recording, sim: Recording, channel: str, mask: np.ndarray,
     return float(np.sqrt(np.mean(r**2))) if r.size >= max(least, 1) else None
 
 
-def noise_ratio(data: Data, sims: list[Recording] | None, part: str = "all") -> float:
-    """Mean over recordings and channels of RMS residual / noise on a part: what the verdicts judge
-    (1 = the model is as close as the noise allows); inf if the model diverged."""
-    if sims is None:
-        return math.inf
-    return _mean_ratio(channel_ratios(data, sims, part))
-
-
-def _mean_ratio(ratios: list[dict]) -> float:
-    return float(np.mean([r["ratio"] for r in ratios])) if ratios else 0.0
-
-
-def typical_ratios(ratios: list[dict]) -> dict[str, float]:
-    """Per channel, the median over recordings of its ratio judged alone (`channel_ratios`' "alone")."""
-    per: dict[str, list[float]] = {}
-    for r in ratios:
-        per.setdefault(r["channel"], []).append(r["alone"])
-    return {c: float(np.median(v)) for c, v in per.items()}
-
-
-def worst_channel(ratios: list[dict]) -> tuple[str, float]:
-    """The channel furthest above its noise, and its ratio, from `channel_ratios`: the median over
-    recordings of RMS residual / noise, the discretisation part of the noise counted DISCRETISATION_COUNT times
-    (`alone`). A mean over channels hides one channel left unexplained (a motor current 1.5x its noise in every
-    recording); the median over recordings does not count one recording where a stick-slipping joint stopped
-    elsewhere (a clean Watflex case: 2.8x in one step, 0.6-0.9x in two). A channel whose floor is mostly our
-    discretisation is judged by its upper estimate, as a window is (locate.local_null): one pair of discretisations
-    estimates it, and a channel that chatters differs at every discretisation (seed 78's clean two-joint
-    watflex-1875e76b and -b06c2d87, the rig's parameters found to 0.1-0.3 %: the shoulder's torque command, its floor
-    its discretisation alone, 1.50 x and 2.11 x, 0.75 x and 1.05 x counted twice; the mean over channels 0.74-0.87 x)."""
-    return max(typical_ratios(ratios).items(), key=lambda cv: cv[1], default=("", 0.0))
-
-
-def fit_scores(data: Data, sims: list[Recording] | None, part: str = "all") -> dict:
-    """Mean NRMSE and correlation over channels and recordings (recordings.md), the noise ratio, each
-    channel's (`channel_ratios`, typical_ratios) and the channel furthest above its noise (`worst_channel`,
-    `worst_ratio`), on a part."""
-    if sims is None:
-        return {"nrmse": math.inf, "correlation": 0.0, "noise_ratio": math.inf, "worst_channel": "", "worst_ratio": math.inf,
-                "channel_ratios": {}}
-    errors, corrs = [], []
-    for rec, sim, chans, train in zip(data.recordings, sims, data.channels, data.train):
-        mask = in_part(train, part)
-        if mask.sum() < 10:
-            continue
-        for c in chans:
-            errors.append(nrmse(rec.channels[c][mask], sim.channels[c][mask]))
-            corrs.append(correlation(rec.channels[c][mask], sim.channels[c][mask]))
-    ratios = channel_ratios(data, sims, part)
-    worst, ratio = worst_channel(ratios)
-    return {"nrmse": float(np.nanmean(errors)), "correlation": float(np.nanmean(corrs)),
-            "noise_ratio": _mean_ratio(ratios), "worst_channel": worst, "worst_ratio": ratio,
-            "channel_ratios": typical_ratios(ratios)}
-
-
-def noise_nrmse(data: Data, part: str = "all") -> float:
-    """Mean NRMSE that measurement noise alone leaves on a part, averaged like fit_scores."""
-    floors = [v for floor, train in zip(data.noise_floor, data.train) if in_part(train, part).sum() >= 10
-              for v in floor.values()]
-    return float(np.mean(floors)) if floors else 0.0
-
-
-def peak(x: np.ndarray) -> float:
-    """Robust peak |x| (99.5th percentile, NaN ignored): what a signal reaches, not its outliers."""
-    x = np.abs(x[np.isfinite(x)])
-    return float(np.percentile(x, 99.5)) if x.size else 0.0
-
-
-def motion_channel(rec: Recording, rig: RigDescription) -> str | None:
-    """The joint position (rad or m) that moves most in the recording: what 'motion' means. A measured one,
-    unless none moves a tenth as far as a reference does (a locked joint's encoder, the moving joint's left
-    out: a rig seen through its strains only); then the reference."""
-    measured, reference = _position_spreads(rec, rig, "measured"), _position_spreads(rec, rig, "reference")
-    if reference and max(reference.values()) > 10 * max(measured.values(), default=0.0):
-        return max(reference, key=reference.get)
-    return max(measured, key=measured.get, default=None)
-
-
-def _position_spreads(rec: Recording, rig: RigDescription, kind: str) -> dict[str, float]:
-    """The spread (std, rad or m) of each joint position of `kind` ("measured", "reference") the recording has."""
-    return {c: float(np.nanstd(rec.channels[c])) for c in rig.of_kind(kind) if c in rec.channels
-            and rig.channels[c]["unit"] in ("rad", "m") and not c.startswith("tip_") and np.isfinite(rec.channels[c]).any()}
-
-
-def scale_of(data: Data, param, where: str) -> float:
-    """The size a scaled catalogue parameter is measured in (effects.Param.scale), from the data:
-    "effort" the peak actuator force or torque, "effort/speed" that over the peak speed,
-    "command" the peak of command channel `where`, "channel" the spread of channel `where`,
-    "motion" the range of the motion channel."""
-    if not param.scale:
-        return 1.0
-    efforts, values, ranges = [], [], []
-    for rec in data.recordings:
-        for c in data.rig.of_kind("command"):
-            if c in rec.channels:
-                efforts.append(peak(rec.channels[c]) * data.rig.effort_per_unit(c))
-        motion = motion_channel(rec, data.rig)
-        if motion:
-            ranges.append(float(np.nanmax(rec.channels[motion]) - np.nanmin(rec.channels[motion])))
-        if where in rec.channels:
-            values.append(peak(rec.channels[where]) if param.scale == "command" else float(np.nanstd(rec.channels[where])))
-    effort = max(efforts, default=1.0) or 1.0
-    if param.scale == "motion":
-        return max(ranges, default=1.0) or 1.0
-    if param.scale == "effort":
-        return effort
-    if param.scale == "effort/speed":
-        return effort / (peak_speed(data) or 1.0)
-    return max(values, default=1.0) or 1.0
-
-
-def motions(data: Data) -> list[tuple[str, np.ndarray] | None]:
-    """Per recording, what moves (motion_channel) as (its name, its positions at the recording's samples; rad or m),
-    None where nothing does. Where that is a reference (the moving joint's encoder not recorded), the joint as the
-    nominal model moves it ("simulated elbow_angle"): a stepped reference's own rate says nothing of the joint's, 0 at
-    its 99.5th percentile and 1/dt at its top (seed 73's watflex-349124fc, elbow angle not recorded: an elbow viscous
-    friction's bounds came out at +-1e15 N m s/rad and it never screened; every window read "at rest"). Simulated once
-    per Data, the first time it is asked."""
-    if data.motion_memo is None:
-        data.motion_memo = []
-        for rec in data.recordings:
-            name = motion_channel(rec, data.rig)
-            simulated = _simulated_motion(rec, data.rig) if name and data.rig.channels[name]["kind"] == "reference" else None
-            data.motion_memo.append(simulated or ((name, rec.channels[name]) if name else None))
-    return data.motion_memo
-
-
-def peak_speed(data: Data) -> float:
-    """The motion's peak speed over the recordings (rad/s or m/s; 0 if nothing moves): the robust peak rate of each
-    recording's `motions`."""
-    return max((peak(np.gradient(m[1], rec.time)) for rec, m in zip(data.recordings, motions(data)) if m), default=0.0)
-
-
-def _simulated_motion(rec: Recording, rig: RigDescription) -> tuple[str, np.ndarray] | None:
-    """The joint position that moves most (motion_channel's measured kind) when `rec`'s experiment is simulated on
-    the nominal model with every channel, sampled at rec's times; None where the recording cannot be simulated."""
-    try:
-        sim = simulate(scenario_from_recording(rec, rig), rig=rig).recording
-    except (ConfigError, SimulationError):
-        return None
-    spread = _position_spreads(sim, rig, "measured")
-    if not spread:
-        return None
-    name = max(spread, key=spread.get)
-    return f"simulated {name}", np.interp(rec.time - rec.time[0], sim.time, sim.channels[name])

@@ -17,7 +17,8 @@ import threading
 import numpy as np
 
 from ..recording import Recording
-from .data import Data, Model, fit_scores
+from .data import Data, Model
+from .scores import fit_scores
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost,
                       rig_slots, value_of)
 from .runner import Gathered, Runner, evaluator, in_units

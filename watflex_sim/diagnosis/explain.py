@@ -5,12 +5,14 @@ and the evidence.
 Contract: `finding(...)` builds one report entry from the final model; `physical_place` names where an
 effect acts in the rig's own terms (a delay 'on the commands' becomes the command channels recorded);
 `units_at` turns the catalogue's generic units into the rig's ("command unit" -> V or N m, torque -> force
-on a linear axis), and adds a current in A where the rig says how much current a command unit drives.
+on a linear axis), and adds a current in A where the rig says how much current a command unit drives;
+`canonical_form` puts the final model's effects in their canonical form with their intervals.
 """
 from __future__ import annotations
 
-from ..effects import CATALOGUE
-from .data import Data, scale_of
+from ..effects import CATALOGUE, canonical, canonical_moves
+from .data import Data, Model
+from .motion import scale_of
 
 EXPLAIN = {
     "coulomb_friction": "dry friction at {where}: it sticks below {torque_positive:.3g} (positive) / {torque_negative:.3g} (negative) and slides against that level",
@@ -136,3 +138,17 @@ def indistinct(data: Data, effect: dict, intervals: dict[str, tuple[float, float
               for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None
               for lo, hi in [intervals.get(p.name) or (None, None)] if lo is not None]
     return bool(checks) and all(checks)
+
+
+def canonical_form(model: Model, ranges: dict[int, dict]) -> tuple[Model, dict[int, dict]]:
+    """The model's effects in their canonical form (effects.canonical: the same physics), each interval moved
+    by the same sign and shift as its parameter (effects.canonical_moves)."""
+    moved = {}
+    for i, effect in enumerate(model.effects):
+        moves = canonical_moves(effect)
+        moved[i] = {}
+        for name, (lo, hi) in ranges.get(i, {}).items():
+            sign, shift = moves.get(name, (1.0, 0.0))
+            a, b = sign * lo + shift, sign * hi + shift
+            moved[i][name] = (min(a, b), max(a, b))
+    return Model([canonical(e) for e in model.effects], dict(model.parameters)), moved

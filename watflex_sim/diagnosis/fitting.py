@@ -17,7 +17,8 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..engine import SimulationError
-from .data import Data, Model, scale_of
+from .data import Data, Model
+from .motion import scale_of
 from .runner import evaluator, hold
 
 log = logging.getLogger(__name__)

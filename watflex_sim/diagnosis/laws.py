@@ -16,7 +16,8 @@ from ..friction import exponential
 from ..joint_friction import patched, scenario_frictions
 from ..recording import Recording
 from ..resim import scenario_from_recording
-from .data import Data, Model, motions
+from .data import Data, Model
+from .motion import motions
 from .refine import parameter_count, refit_in_place, scores_without
 from .runner import Runner
 from .screening import make_candidate

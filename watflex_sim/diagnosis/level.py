@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..effects import CATALOGUE
-from .data import Data, Model, scale_of
+from .data import Data, Model
+from .motion import scale_of
 from .fitting import Slot, at_internal, fd_step, refit_step, residual_variance, value_of
 from .period import reach_of, stepped, walk, within
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..recording import Recording
 from ..rigdesc import RigDescription
-from .data import DISCRETISATION_COUNT, Data, motion_channel, motions
+from .data import DISCRETISATION_COUNT, Data
+from .motion import motion_channel, motions
 
 WINDOW_S = 0.05  # s, moving-RMS window of the residual
 LOCAL_WINDOW_S = 0.1  # s, window of the local test (local_excess)
@@ -23,7 +24,7 @@ LOCAL_MARGIN = 4.0  # a window this far above its local null is a misfit, whatev
 
 def regimes(rec: Recording, rig: RigDescription, i0: int, i1: int, motion: tuple[str, np.ndarray] | None = None) -> str:
     """Words for what the rig was doing in samples i0..i1: direction, rest, reversal, saturation. `motion`: what
-    moves (data.motions: its name and positions), else the recording's motion_channel."""
+    moves (motion.motions: its name and positions), else the recording's motion_channel."""
     words = []
     if motion is None and (channel := motion_channel(rec, rig)):
         motion = channel, rec.channels[channel]

@@ -21,7 +21,8 @@ import math
 import numpy as np
 
 from ..effects import CATALOGUE
-from .data import Model, scale_of
+from .data import Model
+from .motion import scale_of
 from .fitting import Slot, at_internal, refit_step, residual_variance, value_of
 
 PROFILE_RATIO = 1.12  # one period of the profile to the next
@@ -145,7 +146,7 @@ def within(points: list, r: np.ndarray, p: int, replicates: list[np.ndarray], er
 
 def neutral_others(data, effect: dict) -> dict[str, float]:
     """The values at which a ripple's parameters other than its amplitude vanish (a spring's 0), in the data's
-    units (data.scale_of)."""
+    units (motion.scale_of)."""
     params = CATALOGUE[effect["effect"]][1]
     return {p.name: p.neutral * scale_of(data, p, effect["where"]) for p in params if p.neutral is not None and p.name != "amplitude"}
 

@@ -10,10 +10,10 @@ hunts leaves more to noise than the nominal one; measured again without the find
 candidate short only of the excess it must remove fitted again with the earlier findings' sizes restarted
 (refine.restart_earlier: two effects that each fit worse alone than neither); each
 earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
-with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); backward
-elimination (a finding whose removal from the final model does not worsen validation is dropped); where no finding is
-left, the rig's parameters refit in the floors' units (refit.without_findings); 95 % intervals; alternatives within noise of the chosen one and,
-when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
+with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); where no
+finding is left, the rig's parameters refit in the floors' units (refit.without_findings); the findings settled
+(settle.settle: backward elimination, the final refit, 95 % intervals, vague findings dropped); alternatives within
+noise of the chosen one and, when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
 `explained` when the findings bring both there, `unexplained` otherwise.
@@ -25,25 +25,25 @@ from copy import deepcopy
 
 import numpy as np
 
-from ..effects import canonical, canonical_moves
 from ..recording import Recording
-from .data import Data, Model, fit_scores, noise_nrmse, prepare, residual_vector, unit_change
+from .data import Data, Model, prepare, residual_vector, unit_change
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
-from .explain import finding
+from .explain import canonical_form, finding
 from .fitting import value_of
-from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .laws import one_law
+from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
 from .refine import (alternative_entry, carry_on, offset_alternative, polish, restart_earlier, single_from_pair,
                      swap_earlier)
-from .refit import (FLOORS, calibrate_noise, final_refit, fine_for_round, floors_after_dropping, held_without,
-                    keep_fidelity, raise_noise_floor, refit_nominal, refit_on_training, without_findings)
+from .refit import (FLOORS, calibrate_noise, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
+                    without_findings)
+from .rescreen import RESCREEN, rescreen
 from .runner import Runner, evaluator, in_units
-from .screening import (RESCREEN, SCREEN_TOP, candidates, concealed, make_candidate, rescreen, screen, shortlist,
-                        signatures, with_findings)
-from .tolerance import at_bounds, beyond_tolerance, fold_within_tolerance
-from .uncertainty import final_intervals
-from .validate import (NOISE_MARGIN, curved_channels, earns_place, eliminate, explained_share, gains, near_place, rival, shortfall,
-                       vague_findings, verdict_of, verdict_reason, within_noise)
+from .scores import fit_scores, noise_nrmse, noise_table, step
+from .screening import SCREEN_TOP, candidates, concealed, make_candidate, screen, shortlist, signatures, with_findings
+from .settle import settle
+from .tolerance import at_bounds, beyond_tolerance
+from .validate import (NOISE_MARGIN, curved_channels, earns_place, explained_share, gains, near_place, rival, shortfall,
+                       verdict_of, verdict_reason, within_noise)
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
@@ -94,7 +94,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     nominal_floors = deepcopy({k: getattr(data, k) for k in FLOORS})  # judged by again where findings are dropped
     raised = False  # whether a finding raised the floors (raise_noise_floor)
     per = unit_change(data)  # the effect fits' noise units, with the closed-loop floor the workers' data lack
-    steps = [{"model": "nominal", **_scores(data, sims_nominal, nominal)}, {"model": "parameters refit", **_scores(data, sims, current)}]
+    steps = [step("nominal", data, sims_nominal, nominal), step("parameters refit", data, sims, current)]
     refit_sims, refit_model = sims, current
     mismatch = locate(data, sims)
     rejected, screened_report, fitted_report, alternatives, rounds = [], [], [], [], []
@@ -210,7 +210,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                              "why": shortfall(best, later)})
             break
         n = len(current.effects)
-        places = lambda r: _places(r["model"])[n:]  # noqa: E731
+        places = lambda r: r["model"].places()[n:]  # noqa: E731
         alternatives += [alternative_entry(data, r, best, n) for r in fitted
                          if places(r) != places(best) and rival(r, best, later, data.absorbable)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
@@ -223,12 +223,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             say("polish", f"round {round_}: carrying {best['effect']} at {best['where']} on as fine as the rig's model")
             best = carry_on(data, runner, scored(data, best, sims))
             current, sims = best["model"], best["sims"]
-        steps.append({"model": f"+ {best['effect']} at {best['where']}", **_scores(data, sims, current)})
-        round_models[_places(current)] = current
+        steps.append(step(f"+ {best['effect']} at {best['where']}", data, sims, current))
+        round_models[current.places()] = current
         if raise_noise_floor(data, runner, current, sims, say):  # later rounds, the verdict and elimination judge by it
             raised = True
             per = unit_change(data)
-            steps.append({"model": "the same, judged by the floors it raises", **_scores(data, sims, current)})
+            steps.append(step("the same, judged by the floors it raises", data, sims, current))
         mismatch = locate(data, sims) or mismatch
     else:  # the loop ran to the limit: whether a further effect would earn its place was never asked
         limited = max_effects
@@ -237,7 +237,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         now, tried = swap_earlier(data, runner, scored(data, {"model": current}, sims), rounds[:-1], PAIR_MARGIN)
         if now["model"] is not current:
             current, sims = now["model"], now["sims"]
-            steps.append({"model": f"{now['effect']} at {now['where']} in an earlier finding's place", **_scores(data, sims, current)})
+            steps.append(step(f"{now['effect']} at {now['where']} in an earlier finding's place", data, sims, current))
         judged = {(loser["effect"], loser["where"], winner["effect"]) for loser, winner in tried}  # judged again beside the later findings
         alternatives = [a for a in alternatives if (a["effect"], a["where"], a["instead_of"]) not in judged] + [
             alternative_entry(data, loser, winner, len(loser["model"].effects) - 1) for loser, winner in tried
@@ -247,57 +247,17 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         if now["model"] is not current:
             say("swap", f"{now['effect']} at {now['where']} explains better than the two friction laws found there")
             current, sims = now["model"], now["sims"]
-            steps.append({"model": f"{now['effect']} at {now['where']} in place of two laws there", **_scores(data, sims, current)})
+            steps.append(step(f"{now['effect']} at {now['where']} in place of two laws there", data, sims, current))
         alternatives += [alternative_entry(data, loser, winner, before) for loser, winner, before in tried
                          if rival(loser, winner, later=True, absorbable=data.absorbable)]
     if not current.effects:  # nothing earned its place
         current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
         if current is not refit_model:
-            steps.append({"model": "parameters refit in the floors' units", **_scores(data, sims, current)})
-    found = len(current.effects)
-    current = fold_within_tolerance(data, current)
-    if len(current.effects) < found:
-        sims = runner.simulate(current) or sims
-    while True:  # until every finding's intervals tell it from no effect (explain.indistinct)
-        kept = len(current.effects)
-        current, sims, ablated = eliminate(data, runner, current, sims, say, local)
-        if raised and len(current.effects) < kept:  # judged by what noise leaves without the dropped findings
-            floors_after_dropping(data, runner, current, sims, nominal_floors, say)
-        if kept and not current.effects:
-            current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
-        if len(current.effects) < found:
-            steps.append({"model": "after backward elimination", **_scores(data, sims, current)})
-        train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
-        trained = current
-        if current.effects:
-            say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")
-            current, sims, trained = final_refit(data, runner, current, sims)
-            steps.append({"model": "parameters refit on all the data", **_scores(data, sims, current)})
-        say("intervals", "95 % intervals from the Jacobian at the final model and the training-only fit")
-        ranges = final_intervals(data, runner, current, sims, trained)
-        vague = vague_findings(data, current, ranges, ablated, held_f, lambda i: held_without(data, runner, trained, i))
-        if not vague:
-            break
-        say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
-                                                   for i in vague) + ": its 95 % intervals include no effect at all")
-        rejected += [{"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
-                      "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
-                      "intervals": ranges.get(i, {}),
-                      "why": "its 95 % intervals include no effect at all and validation without it is not far worse"}
-                     for i in vague]
-        found = len(trained.effects)
-        current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
-        if current.effects:  # its numbers were fitted beside the dropped: fitted again, from a round's fit of it if any
-            say("elimination", "refitting the rest on the training blocks")
-            current, new = refit_on_training(data, runner, round_models.get(_places(current), current))
-            sims = new or sims
-            if raised:
-                floors_after_dropping(data, runner, current, sims, nominal_floors, say)
-        else:
-            if raised:
-                floors_after_dropping(data, runner, current, sims, nominal_floors, say)  # no simulation
-            current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
-    current, ranges = _canonical(current, ranges)
+            steps.append(step("parameters refit in the floors' units", data, sims, current))
+    current, sims, ranges, ablated, train_f, held_f = settle(
+        data, runner, current, sims, say, local=local, raised=raised, nominal_floors=nominal_floors,
+        refit=(refit_model, refit_sims), round_models=round_models, steps=steps, rejected=rejected)
+    current, ranges = canonical_form(current, ranges)
     refit_train, refit_held = fit_scores(data, refit_sims, "train"), fit_scores(data, refit_sims, "held_out")
     findings = []
     for i, effect in sorted(enumerate(current.effects), key=lambda ie: -ablated[ie[0]]["noise_ratio"]):
@@ -328,7 +288,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "parameters_not_refit": sorted(data.idle),  # the recordings do not depend on them
         "noise_nrmse": noise_nrmse(data),
         "noise": {"margin": NOISE_MARGIN, "training_ratio": train_f["noise_ratio"], "validation_ratio": held_f["noise_ratio"],
-                  "per_channel": _noise_table(data), "fidelity": runner.fidelity, "coarse_error": refit.coarse_error},
+                  "per_channel": noise_table(data), "fidelity": runner.fidelity, "coarse_error": refit.coarse_error},
         "steps": steps,
         "screening": screened_report,
         "candidates": fitted_report,
@@ -348,36 +308,3 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         report["proposed_experiment"] = propose_experiment(data, current, alternatives, runner)
     return report
 
-
-def _canonical(model: Model, ranges: dict[int, dict]) -> tuple[Model, dict[int, dict]]:
-    """The model's effects in their canonical form (effects.canonical: the same physics), each interval moved
-    by the same sign and shift as its parameter (effects.canonical_moves)."""
-    moved = {}
-    for i, effect in enumerate(model.effects):
-        moves = canonical_moves(effect)
-        moved[i] = {}
-        for name, (lo, hi) in ranges.get(i, {}).items():
-            sign, shift = moves.get(name, (1.0, 0.0))
-            a, b = sign * lo + shift, sign * hi + shift
-            moved[i][name] = (min(a, b), max(a, b))
-    return Model([canonical(e) for e in model.effects], dict(model.parameters)), moved
-
-
-def _noise_table(data: Data) -> list[dict]:
-    model = data.discretisation or [{} for _ in data.names]
-    return [{"recording": n, "channel": c, "noise": noise[c], "declared": float(data.rig.channels[c].get("noise", 0.0)),
-             "discretisation": error.get(c, 0.0), "unit": data.rig.channels[c]["unit"]}
-            for n, chans, noise, error in zip(data.names, data.channels, data.noise, model) for c in chans]
-
-
-def _scores(data: Data, sims: list[Recording], model: Model) -> dict:
-    """One stage of the report's 'steps': training and validation NRMSE and noise ratio, and the model."""
-    train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
-    return {"train_nrmse": train["nrmse"], "held_out_nrmse": held["nrmse"], "train_noise_ratio": train["noise_ratio"],
-            "held_out_noise_ratio": held["noise_ratio"], "effects": [dict(e) for e in model.effects],
-            "parameters": dict(model.parameters)}
-
-
-def _places(model: Model) -> tuple:
-    """The model's effects as (effect, place) pairs, in order: which physics it has, whatever the numbers."""
-    return tuple((e["effect"], e["where"]) for e in model.effects)

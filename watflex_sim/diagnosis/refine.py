@@ -10,7 +10,9 @@ chosen one for the report. Each returns a result scored like a candidate (effect
 from __future__ import annotations
 
 from ..effects import CATALOGUE
-from .data import Data, Model, fit_scores, scale_of, unit_change
+from .data import Data, Model, unit_change
+from .motion import scale_of
+from .scores import fit_scores
 from .explain import units_at
 from .fitting import Slot, effect_slots_of, levenberg, rig_slots, unpack, value_of
 from .period import neutral_others, period_profile, periodic_name, profile_ladder

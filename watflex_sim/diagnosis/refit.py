@@ -23,8 +23,8 @@ import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from .data import (Data, Model, add_closed_loop_noise, add_discretisation_error, channel_ratios, fit_scores, residual_vector,
-                   unit_change)
+from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, residual_vector, unit_change
+from .scores import channel_ratios, fit_scores
 from .effect_fit import scored
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
@@ -195,7 +195,7 @@ def _as_fine(data: Data, runner: Runner, models: list[Model], coarse: list[list[
 
 def _largest_difference(data: Data, ours: list[Recording], other: list[Recording]) -> float:
     """The largest RMS difference of two simulations of the recordings over every channel, in units of its noise
-    (data.channel_ratios with `ours` standing for the measurements)."""
+    (scores.channel_ratios with `ours` standing for the measurements)."""
     return max((r["ratio"] for r in channel_ratios(replace(data, recordings=ours), other)), default=0.0)
 
 

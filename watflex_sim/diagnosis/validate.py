@@ -20,7 +20,9 @@ import math
 import numpy as np
 
 from ..recording import Recording
-from .data import DISCRETISATION_COUNT, Data, Model, fit_scores, peak
+from .data import DISCRETISATION_COUNT, Data, Model
+from .motion import peak
+from .scores import fit_scores
 from .explain import indistinct
 from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
 from .runner import Runner
