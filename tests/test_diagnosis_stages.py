@@ -994,12 +994,18 @@ def test_a_rig_parameter_pinned_at_its_bound_asks_for_the_effect_that_turns_its_
 
 def test_refit_parameters_say_which_quantity_their_value_is():
     """report.parameter_values: the laser arm's `hub_inertia` turns the hub geom's mass (rigs/laser_arm.toml: knob
-    geom_mass), so its value is a mass in kg and says so, not an inertia in kg; `motor_inertia` is the hub joint's
-    armature in kg m^2."""
+    geom_mass), so its value is a mass in kg and says so, not an inertia in kg, with the inertia that mass gives the hub
+    about its hinge in kg m^2 (the disc's m r^2 / 2: params.LASER_ARM.hub_inertia, J_arm - rho L^3/3 - m_tip L^2 of
+    rigs.md section 1, 0.01938 kg m^2); `motor_inertia` is the hub joint's armature in kg m^2. EMPS's carriage slides:
+    its mass has no inertia about a hinge."""
+    from watflex_sim.params import LASER_ARM
     from watflex_sim.report import parameter_values
 
-    values = parameter_values("laser_arm", {"hub_inertia": 1.0, "motor_inertia": 1.0})
+    values = parameter_values("laser_arm", {"hub_inertia": 1.03, "motor_inertia": 1.0})
     assert values["hub_inertia"]["unit"] == "kg" and values["hub_inertia"]["quantity"] == "mass of geom hub"
+    assert values["hub_inertia"]["inertia"] == pytest.approx(1.03 * LASER_ARM.hub_inertia, rel=1e-6)
+    assert values["hub_inertia"]["inertia_unit"] == "kg m^2" and values["hub_inertia"]["inertia_about"] == "joint hub"
+    assert "inertia" not in parameter_values("emps", {"mass": 1.0})["mass"]
     assert values["motor_inertia"]["unit"] == "kg m^2" and values["motor_inertia"]["quantity"].startswith("armature")
 
 

@@ -30,6 +30,9 @@ def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
         entry = {"ratio": ratio}
         if knob == "geom_mass":
             entry.update(value=float(spec.geom(target).mass) * ratio, unit="kg", quantity=f"mass of geom {target}")
+            turning = geom_inertia_about_hinge(spec, target)
+            if turning is not None:  # on a body that turns: the inertia that mass gives it, which is what the rig names
+                entry.update(inertia=turning[1] * ratio, inertia_unit="kg m^2", inertia_about=f"joint {turning[0]}")
         elif knob == "damping":
             entry.update(value=float(model.dof_damping[model.joint(target).dofadr[0]]) * ratio, unit="N s/m or N m s/rad",
                          quantity=f"damping of joint {target}")
@@ -38,6 +41,33 @@ def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
                          quantity=f"armature (reflected inertia) of joint {target}")
         out[name] = entry
     return out
+
+
+def geom_inertia_about_hinge(spec: mujoco.MjSpec, geom: str) -> tuple[str, float] | None:
+    """(hinge, the geom's own moment of inertia about that hinge's axis in kg m^2) where the geom's body turns on a
+    hinge; None otherwise. The geom's share of its body's inertia is linear in its mass: the body's inertia about the
+    axis (its principal inertia turned into the body frame, plus its mass times the squared distance of its centre
+    of mass from the axis) with the geom's mass doubled, less that with the mass as it is."""
+    def about_axis(s: mujoco.MjSpec) -> tuple[str, float] | None:
+        m = s.compile()
+        body = m.geom(geom).bodyid[0]
+        hinges = [j for j in range(m.njnt) if m.jnt_bodyid[j] == body and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+        if not hinges:
+            return None
+        axis, at = m.jnt_axis[hinges[0]], m.jnt_pos[hinges[0]]
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, m.body_iquat[body])
+        rot = rot.reshape(3, 3)
+        inertia = rot @ np.diag(m.body_inertia[body]) @ rot.T
+        d = m.body_ipos[body] - at
+        return m.joint(hinges[0]).name, float(axis @ inertia @ axis + m.body_mass[body] * (d @ d - (d @ axis) ** 2))
+
+    once = about_axis(spec)
+    if once is None:
+        return None
+    doubled = spec.copy()
+    doubled.geom(geom).mass *= 2.0
+    return once[0], about_axis(doubled)[1] - once[1]
 
 
 def patched_spec(rig: str, patch_spec: dict) -> mujoco.MjSpec:
