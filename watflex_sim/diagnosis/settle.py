@@ -54,11 +54,11 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
             break
         say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
                                                    for i in vague) + ": its 95 % intervals include no effect at all")
-        rejected.extend([{"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
-                      "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
-                      "intervals": ranges.get(i, {}),
-                      "why": "its 95 % intervals include no effect at all and validation without it is not far worse"}
-                     for i in vague])
+        rejected.extend({"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
+                         "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
+                         "intervals": ranges.get(i, {}),
+                         "why": "its 95 % intervals include no effect at all and validation without it is not far worse"}
+                        for i in vague)
         found = len(trained.effects)
         current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
         if current.effects:  # its numbers were fitted beside the dropped: fitted again, from a round's fit of it if any
