@@ -25,13 +25,13 @@ One module per stage, each with its contract in its docstring:
   pipeline    the stages in order and the report
 """
 from .data import Data, Model, prepare, residual_vector
-from .motion import motion_channel, scale_of
-from .scores import fit_scores, noise_nrmse, noise_ratio
 from .effect_fit import step_search
 from .fitting import Slot, intervals, levenberg, refit_parameters
 from .locate import locate
+from .motion import motion_channel, scale_of
 from .pipeline import diagnose
 from .runner import simulate_all
+from .scores import fit_scores, noise_nrmse, noise_ratio
 from .screening import MIN_GAIN, Candidate, concealed, screen, shortlist
 from .validate import MIN_HELD_GAIN, NOISE_MARGIN
 

@@ -18,11 +18,11 @@ import numpy as np
 
 from ..recording import Recording
 from .data import Data, Model
-from .scores import fit_scores
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost,
                       rig_slots, value_of)
 from .runner import Gathered, Runner, evaluator, in_units
 from .scan import PERIOD_LADDER, beside, period_scans, same_rung, scan_shape
+from .scores import fit_scores
 from .screening import Candidate
 from .tolerance import at_bounds
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from ..effects import CATALOGUE
 from .data import Data, Model
-from .motion import scale_of
 from .fitting import Slot, at_internal, fd_step, refit_step, residual_variance, value_of
+from .motion import scale_of
 from .period import reach_of, stepped, walk, within
 
 LEVEL_RATIO = 2**0.5  # one value of a shape parameter's profile to the next (the scan's rungs are 2x apart)

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..effects import CATALOGUE
 from .data import Model
-from .motion import scale_of
 from .fitting import Slot, at_internal, refit_step, residual_variance, value_of
+from .motion import scale_of
 
 PROFILE_RATIO = 1.12  # one period of the profile to the next
 PROFILE_STEPS = 4  # periods each side of the estimate at first ...

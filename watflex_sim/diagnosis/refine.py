@@ -11,14 +11,14 @@ from __future__ import annotations
 
 from ..effects import CATALOGUE
 from .data import Data, Model, unit_change
-from .motion import scale_of
-from .scores import fit_scores
+from .effect_fit import scored
 from .explain import units_at
 from .fitting import Slot, effect_slots_of, levenberg, rig_slots, unpack, value_of
+from .motion import scale_of
 from .period import neutral_others, period_profile, periodic_name, profile_ladder
 from .runner import Runner, evaluator, in_units
-from .effect_fit import scored
 from .scan import PERIOD_CHECKED, period_ladder
+from .scores import fit_scores
 from .validate import gains
 
 POLISH_ITERATIONS = 6

@@ -24,12 +24,12 @@ import numpy as np
 from ..model import ConfigError
 from ..recording import Recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, residual_vector, unit_change
-from .scores import channel_ratios, fit_scores
 from .effect_fit import scored
 from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
 from .refine import POLISH_ITERATIONS, carry_on, in_noise
 from .runner import Runner, evaluator, in_units
+from .scores import channel_ratios, fit_scores
 from .screening import SCREEN_FINER
 from .uncertainty import FINER, NOISE_SEED
 from .validate import NOISE_MARGIN, within, within_noise

@@ -19,8 +19,8 @@ from scipy.optimize import lsq_linear
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, STRIDE
-from .motion import scale_of
 from .fitting import Slot, effect_slots_of, jacobian, value_of
+from .motion import scale_of
 from .runner import evaluator, in_units
 
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on

@@ -22,11 +22,11 @@ import numpy as np
 
 from ..recording import Recording
 from .data import DISCRETISATION_COUNT, Data, Model
-from .motion import peak
-from .scores import fit_scores
 from .explain import indistinct
 from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
+from .motion import peak
 from .runner import Runner
+from .scores import fit_scores
 from .screening import MIN_GAIN
 from .tolerance import knob_partner
 
