@@ -759,7 +759,8 @@ def test_a_later_finding_must_remove_the_excess_that_asked_for_it():
     6 % (< MIN_EXCESS_GAIN 25 %), not the 356 % the mean would say. Validation within the margin
     everywhere and its mean within EXCESS_FLOOR of the noise: nothing (0); its mean further (seed 82's
     laser_arm-a3b93926 after the payload, 1.13 x, training 1.26 x with a channel at 1.68 x): the mean's excess over 1,
-    which a beam stiffness taking validation to 0.884 x removes whole."""
+    which a beam stiffness taking validation to 0.884 x removes whole; a model short of the noise (seed 83's clean
+    two-joint watflex-bfdbfde3, an elbow-encoder gain taking 1.19 x to 1.10 x) still nothing."""
     from watflex_sim.diagnosis.validate import EXCESS_FLOOR, MIN_EXCESS_GAIN, excess_gain
 
     def held(mean, worst=1.0, channel="strain_2A", **others):
@@ -771,6 +772,7 @@ def test_a_later_finding_must_remove_the_excess_that_asked_for_it():
     assert excess_gain(held(1.023, 1.359), held(1.0, 1.05)) == pytest.approx(0.309 / 0.359)
     assert excess_gain(held(1.05, 1.25), held(0.9, 1.0)) == 0.0 and 1.05 < 1.0 + EXCESS_FLOOR
     assert excess_gain(held(1.13, 1.25), held(0.884, 1.0)) == pytest.approx(0.246 / 0.13)
+    assert excess_gain(held(1.19, 1.25), held(1.10, 1.0)) == 0.0  # seed 83's clean two-joint case: not to the noise
 
 
 def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative():

@@ -68,19 +68,22 @@ def excess_gain(held_now: dict, held_new: dict) -> float:
     """Share of what validation has above the noise that a model removes, on what made one more round
     necessary: the mean noise ratio's excess over 1 where the mean is beyond NOISE_MARGIN, else the excess
     of the channel beyond it (`worst_channel`), else, where validation is within the margin everywhere but its
-    mean more than EXCESS_FLOOR above the noise (a round training asked for), the mean's excess over 1, else 0 (a
-    round for training alone shows nothing on unseen data). Seed 5: with a 11 ms delay found, validation
+    mean more than EXCESS_FLOOR above the noise (a round training asked for), the mean's excess over 1 for a model
+    that takes validation to the noise, else 0 (a round for training alone shows nothing on unseen data). Seed 5: with a 11 ms delay found, validation
     at 1.00x the noise on the mean and strain_2A above the margin, a 0.03 % gain of the elbow encoder
     lowered the mean to 0.96x - 'removing' 4e7 times the mean's excess (then 1e-9) - and strain_2A not at all.
     Seed 82's laser_arm-a3b93926 (a beam 0.61 x as stiff with a 0.76 kg payload): the payload found, training 1.26 x
     with voltage_cmd 1.68 x, validation 1.13 x on the mean, within the margin on every channel; a beam stiffness or
-    a hub compliance then took validation to 0.885 x (training -31 %) and was refused as removing 0 % of nothing."""
+    a hub compliance then took validation to 0.885 x (training -31 %) and was refused as removing 0 % of nothing.
+    Seed 83's clean two-joint watflex-bfdbfde3: validation 1.19 x, an elbow-encoder gain taking it to 1.10 x (training
+    -8.6 %) would have counted 46 %: short of the noise, it still counts nothing."""
     if held_now["noise_ratio"] > NOISE_MARGIN:
         return (held_now["noise_ratio"] - held_new["noise_ratio"]) / (held_now["noise_ratio"] - 1.0)
     if held_now["worst_ratio"] > NOISE_MARGIN:
         channel, before = held_now["worst_channel"], held_now["worst_ratio"]
         return (before - held_new["channel_ratios"].get(channel, math.inf)) / (before - 1.0)
-    if held_now["noise_ratio"] > 1.0 + EXCESS_FLOOR:  # within the margin, training asked for the round: the mean's
+    if held_now["noise_ratio"] > 1.0 + EXCESS_FLOOR and held_new["noise_ratio"] <= 1.0:  # within the margin, training
+        # asked for the round: a model that takes validation to the noise removes the mean's excess, and counts
         return (held_now["noise_ratio"] - held_new["noise_ratio"]) / (held_now["noise_ratio"] - 1.0)
     return 0.0
 
