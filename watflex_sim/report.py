@@ -9,7 +9,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from .effects import Patch, apply_effects, apply_parameters
+from .effects import Patch, apply_effects, apply_parameters, knob_body_inertia
 from .interrupts import staged
 from .plot import plot_recording
 from .recording import Recording
@@ -30,7 +30,7 @@ def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
         entry = {"ratio": ratio}
         if knob == "geom_mass":
             entry.update(value=float(spec.geom(target).mass) * ratio, unit="kg", quantity=f"mass of geom {target}")
-            turning = geom_inertia_about_hinge(spec, target)
+            turning = geom_inertia_about_hinge(spec, model, target)
             if turning is not None:  # on a body that turns: the inertia that mass gives it, which is what the rig names
                 entry.update(inertia=turning[1] * ratio, inertia_unit="kg m^2", inertia_about=f"joint {turning[0]}")
         elif knob == "damping":
@@ -43,13 +43,13 @@ def parameter_values(rig: str, ratios: dict[str, float]) -> dict[str, dict]:
     return out
 
 
-def geom_inertia_about_hinge(spec: mujoco.MjSpec, geom: str) -> tuple[str, float] | None:
+def geom_inertia_about_hinge(spec: mujoco.MjSpec, model: mujoco.MjModel, geom: str) -> tuple[str, float] | None:
     """(hinge, the geom's own moment of inertia about that hinge's axis in kg m^2) where the geom's body turns on a
-    hinge; None otherwise. The geom's share of its body's inertia is linear in its mass: the body's inertia about the
-    axis (its principal inertia turned into the body frame, plus its mass times the squared distance of its centre
-    of mass from the axis) with the geom's mass doubled, less that with the mass as it is."""
-    def about_axis(s: mujoco.MjSpec) -> tuple[str, float] | None:
-        m = s.compile()
+    hinge; None otherwise. `model` is `spec` compiled. The geom's share of its body's inertia is linear in its mass:
+    the body's inertia about the axis (its principal inertia turned into the body frame, plus its mass times the
+    squared distance of its centre of mass from the axis) with the geom's mass doubled (the `geom_mass` knob, x2),
+    less that with the mass as it is."""
+    def about_axis(m: mujoco.MjModel) -> tuple[str, float] | None:
         body = m.geom(geom).bodyid[0]
         hinges = [j for j in range(m.njnt) if m.jnt_bodyid[j] == body and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
         if not hinges:
@@ -62,12 +62,14 @@ def geom_inertia_about_hinge(spec: mujoco.MjSpec, geom: str) -> tuple[str, float
         d = m.body_ipos[body] - at
         return m.joint(hinges[0]).name, float(axis @ inertia @ axis + m.body_mass[body] * (d @ d - (d @ axis) ** 2))
 
-    once = about_axis(spec)
+    once = about_axis(model)
     if once is None:
         return None
-    doubled = spec.copy()
-    doubled.geom(geom).mass *= 2.0
-    return once[0], about_axis(doubled)[1] - once[1]
+    doubled, patch = spec.copy(), Patch()
+    knob_body_inertia(patch, geom, 2.0)
+    for edit in patch.spec_edits:
+        edit(doubled)
+    return once[0], about_axis(doubled.compile())[1] - once[1]
 
 
 def patched_spec(rig: str, patch_spec: dict) -> mujoco.MjSpec:

@@ -69,7 +69,8 @@ def excess_gain(held_now: dict, held_new: dict) -> float:
     necessary: the mean noise ratio's excess over 1 where the mean is beyond NOISE_MARGIN, else the excess
     of the channel beyond it (`worst_channel`), else, where validation is within the margin everywhere but its
     mean more than EXCESS_FLOOR above the noise (a round training asked for), the mean's excess over 1 for a model
-    that takes validation to the noise, else 0 (a round for training alone shows nothing on unseen data). Seed 5: with a 11 ms delay found, validation
+    that takes validation to the noise, else 0 (a round for training alone shows nothing on unseen data).
+    Seed 5: with a 11 ms delay found, validation
     at 1.00x the noise on the mean and strain_2A above the margin, a 0.03 % gain of the elbow encoder
     lowered the mean to 0.96x - 'removing' 4e7 times the mean's excess (then 1e-9) - and strain_2A not at all.
     Seed 82's laser_arm-a3b93926 (a beam 0.61 x as stiff with a 0.76 kg payload): the payload found, training 1.26 x
