@@ -806,6 +806,37 @@ def test_an_explanation_within_the_noise_beside_the_chosen_one_is_an_alternative
     assert rival(fitted(4.6, 4.603, 1.20, 1.23), fitted(4.6, 4.603, 1.18, 1.20), later=False, absorbable=1.0)  # 2.5 % worse
 
 
+def test_a_candidate_at_its_catalogue_bound_gives_way_to_a_rival_inside_its_range(laser_recordings):
+    """refine.inside_catalogue, on seed 82's laser_arm-a3b93926 (beam x0.61 and a 0.76 kg payload; after the payload,
+    validation at 1.13 x the noise): a hub compliance at the catalogue's stiffest 3e4 N m/rad (effects.CATALOGUE) took
+    validation to 0.884 x, the true beam stiffness x0.634 to 0.885 x: the beam is taken. Not when the compliance is
+    inside its range (2e4), nor for a rival at its own bound (a beam x1000, the rigid end), nor for one 7 % worse on
+    validation; a bound at 0 (a one-way friction's other side) is a value, not a bound."""
+    from watflex_sim.diagnosis.refine import at_catalogue_bound, inside_catalogue
+    from watflex_sim.diagnosis.validate import gains
+
+    data = prepare(laser_recordings, ["a", "b"])
+    payload = dict(effect="payload", where="tip", mass=0.743)
+
+    def scores(mean):
+        return {"noise_ratio": mean, "worst_channel": "motor_current", "worst_ratio": mean, "channel_ratios": {"motor_current": mean}}
+
+    def fitted(effect, held_after, **parameters):
+        model = Model([payload, dict(effect=effect, where="hub" if effect == "joint_compliance" else "beam", **parameters)], {})
+        return gains({"train": scores(0.858), "held_out": scores(held_after), "n_params": 1, "effect": effect,
+                      "where": model.effects[1]["where"], "model": model}, scores(1.262), scores(1.131))
+
+    beam = fitted("link_stiffness_change", 0.8854, ratio=0.634)
+    assert inside_catalogue(data, [fitted("joint_compliance", 0.8841, stiffness=3e4), beam], True, 1) is beam
+    inside = fitted("joint_compliance", 0.8841, stiffness=2e4)
+    assert inside_catalogue(data, [inside, beam], True, 1) is inside
+    at_bound = fitted("joint_compliance", 0.8841, stiffness=3e4)
+    assert inside_catalogue(data, [at_bound, fitted("link_stiffness_change", 0.8854, ratio=1000.0)], True, 1) is at_bound
+    assert inside_catalogue(data, [at_bound, fitted("link_stiffness_change", 0.946, ratio=0.634)], True, 1) is at_bound
+    one_way = Model([dict(effect="coulomb_friction", where="hub", torque_positive=0.3, torque_negative=0.0)], {})
+    assert not at_catalogue_bound(data, one_way, 0) and not at_catalogue_bound(data, at_bound["model"], 2)
+
+
 def test_the_absorbable_share_of_the_floor(laser_recordings):
     """Data.absorbable: a floor twice a channel's white noise is 3/4 not that noise (1 - 1/2^2); as prepared
     (floor = the noise the recordings show) nothing is; the mean is over recordings and channels."""

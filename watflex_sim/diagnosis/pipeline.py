@@ -32,8 +32,8 @@ from .explain import canonical_form, finding
 from .fitting import value_of
 from .laws import one_law
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
-from .refine import (alternative_entry, carry_on, offset_alternative, polish, restart_earlier, single_from_pair,
-                     swap_earlier)
+from .refine import (alternative_entry, carry_on, inside_catalogue, offset_alternative, polish, restart_earlier,
+                     single_from_pair, swap_earlier)
 from .refit import (FLOORS, calibrate_noise, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
                     without_findings)
 from .rescreen import RESCREEN, rescreen
@@ -177,8 +177,12 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                               for r in fitted])
         # a later finding must remove the excess that asked for its round, but for the effect that frees a rig
         # parameter pinned at its tolerance bound (beyond_tolerance): that is evidence of its own
-        best = fitted[0]
-        later = bool(current.effects) and (best["effect"], best["where"]) not in {(c.effect, c.where) for c in pinned}
+        is_later = lambda r: bool(current.effects) and (r["effect"], r["where"]) not in {(c.effect, c.where) for c in pinned}  # noqa: E731
+        best = inside_catalogue(data, fitted, is_later(fitted[0]), len(current.effects))
+        if best is not fitted[0]:
+            say("candidate fits", f"round {round_}: {fitted[0]['effect']} at {fitted[0]['where']} has a parameter at its "
+                f"catalogue bound; {best['effect']} at {best['where']}, within noise of it on validation, is taken")
+        later = is_later(best)
         if earns_place(best, later):
             say("polish", f"round {round_}: polishing {best['effect']} at {best['where']} and trying alternatives")
             best = judge(polish(data, runner, best, rig_start={}))  # {}: the datasheet's values
