@@ -177,7 +177,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                               for r in fitted])
         # a later finding must remove the excess that asked for its round, but for the effect that frees a rig
         # parameter pinned at its tolerance bound (beyond_tolerance): that is evidence of its own
-        is_later = lambda r: bool(current.effects) and (r["effect"], r["where"]) not in {(c.effect, c.where) for c in pinned}  # noqa: E731
+        freeing = {(c.effect, c.where) for c in pinned}
+        is_later = lambda r: bool(current.effects) and (r["effect"], r["where"]) not in freeing  # noqa: E731
         best = inside_catalogue(data, fitted, is_later(fitted[0]), len(current.effects))
         if best is not fitted[0]:
             say("candidate fits", f"round {round_}: {fitted[0]['effect']} at {fitted[0]['where']} has a parameter at its "
