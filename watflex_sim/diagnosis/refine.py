@@ -53,10 +53,9 @@ def at_catalogue_bound(data: Data, model: Model, first: int) -> bool:
     catalogue range (fitting.effect_slots_of): the fit wanted it beyond what the effect can be, so its form is not the
     data's. A bound at 0 is a value of its own (a one-way friction's other side)."""
     for slot in effect_slots_of(data, model):
-        if slot.where[1] >= first:
-            value = model.effects[slot.where[1]][slot.name]
-            if any(b != 0 and abs(value - b) <= AT_CATALOGUE_BOUND * abs(b) for b in (slot.low, slot.high)):
-                return True
+        value = value_of(model, slot)
+        if slot.where[1] >= first and any(b != 0 and abs(value - b) <= AT_CATALOGUE_BOUND * abs(b) for b in (slot.low, slot.high)):
+            return True
     return False
 
 
