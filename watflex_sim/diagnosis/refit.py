@@ -25,37 +25,24 @@ from ..model import ConfigError
 from ..recording import Recording
 from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, residual_vector, unit_change
 from .effect_fit import scored
-from .fitting import Slot, compass, effect_slots_of, jacobian, levenberg, rig_slots, value_of
+from .fitting import Slot, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
+from .pattern import compass_worth, pattern_search
 from .refine import POLISH_ITERATIONS, carry_on, in_noise
 from .runner import Runner, evaluator, in_units
 from .scores import channel_ratios, fit_scores
 from .screening import SCREEN_FINER
 from .uncertainty import FINER, NOISE_SEED
-from .validate import NOISE_MARGIN, within, within_noise
+from .validate import within_noise
 
 REFIT_ITERATIONS = 8
-COMPASS_SWEEPS = 14  # at most this many pattern-search sweeps after the refit's Levenberg-Marquardt (2 simulations
-# per parameter each); it stops once training and validation are within the noise, or once no step changes the
-# cost by CHI2_RESOLUTION or by what a move must gain (fitting.compass; 6 sweeps halved the steps to
-# 0.4 % of a tolerance at best: a clean Watflex case's strain bridge is 1.3 x its noise at link 2's EI 0.04 % off)
-COMPASS_REACH = 3.0  # x NOISE_MARGIN: only a refit within this of the noise gets the pattern search; one further
-# off is missing physics, which a harder refit only pushes into the rig's parameters (a 0.33 kg Watflex payload: the
-# refit at 11.7 x the noise with elbow inertia at its bound and link 2's EI 4 % low, where its fits then started)
 RAISED = 1.1  # raise_noise_floor raises a channel's floor measured again with the findings only beyond this factor
 # (a noise ratio 10 % lower: within what the floor's own estimate moves by, and the rest of the diagnosis unchanged)
-CHI2_RESOLUTION = 0.5  # Huber cost in noise units (chi-square / 2): a change below this the noise does not resolve
 COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
 # nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
 # most 2 % to a channel's noise variance, and the 2 x finer comparison (calibrate_noise) then counts it. Measured:
 # the laser arm 0.04-0.07 x (6 segments at 0.2 ms for 11 at 0.1 ms, half the cost), Watflex 0.5-7.5 x (seeds 65-66)
 
-
-
-def compass_worth(train: dict) -> bool:
-    """Whether the refit's training scores ask for the pattern search: short of the noise on some channel,
-    but within COMPASS_REACH x the margin (further off, the rig's parameters would only absorb missing physics)."""
-    return not within(train) and train["noise_ratio"] <= COMPASS_REACH * NOISE_MARGIN
 
 
 @dataclass
@@ -98,18 +85,7 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     if free and sims is not None and compass_worth(fit_scores(data, sims, "train")):
         say("refit", "the refit is short of the noise: a pattern search over the same parameters (stick-slip makes "
             "the cost rough)")
-        checked = {}
-
-        def within_both(model: Model) -> bool:
-            """The verdict's own test on training and validation data: once it holds, a lower cost changes no verdict."""
-            checked.update(model=model, sims=runner.simulate(model))
-            return checked["sims"] is not None and within_noise(fit_scores(data, checked["sims"], "train"),
-                                                                fit_scores(data, checked["sims"], "held_out"))
-        current = compass(evaluate, current, free, [value_of(current, s) for s in free],
-                          residual_vector(data, sims, unit="noise"), COMPASS_SWEEPS, resolution=CHI2_RESOLUTION,
-                          enough=within_both)
-        # the last move judged is where the search ended unless a later move followed: its simulations serve
-        sims = checked["sims"] if checked.get("model") == current else runner.simulate(current)
+        current, sims = pattern_search(data, runner, evaluate, current, free, sims)
     # in spread units: the screening and the fits turn them back to noise units with the noise calibrated next
     rig_columns = rig_columns * unit_change(data)[:, None]
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:

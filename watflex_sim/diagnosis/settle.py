@@ -8,11 +8,13 @@ beyond their tolerance are folded into effects first (tolerance.fold_within_tole
 its final model does not need it on validation (validate.eliminate) or its intervals include no effect and validation
 without it is not far worse (validate.vague_findings); what is left is refit on the training blocks, from the round's
 fit of the same findings if there was one, and the floors measured again without the dropped (refit.floors_after_dropping)
-where a finding had raised them. `steps` and `rejected` (the report's lists) get what happened appended.
+where a finding had raised them. Before it is judged, a model short of the noise but near it is carried on by the
+pattern search on the training blocks (pattern.pattern_polish). `steps` and `rejected` (the report's lists) get what happened appended.
 """
 from __future__ import annotations
 
 from .data import Data, Model
+from .pattern import pattern_polish
 from .refit import final_refit, floors_after_dropping, held_without, refit_on_training, without_findings
 from .runner import Runner
 from .scores import fit_scores, step
@@ -41,6 +43,10 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
             current, sims = without_findings(data, runner, current, refit_model, refit_sims, say)
         if len(current.effects) < found:
             steps.append(step("after backward elimination", data, sims, current))
+        polished, sims = pattern_polish(data, runner, current, sims, say)
+        if polished is not current:
+            current = polished
+            steps.append(step("parameters carried on by a pattern search", data, sims, current))
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
         trained = current
         if current.effects:

@@ -42,9 +42,11 @@ LONE_CHANNEL = 2.0 * NOISE_MARGIN  # ... unless the whole is within NOISE_MARGIN
 # seeds 75-81 (and their re-runs) every channel was at most 1.55 x its noise but one: seed 81's laser_arm-493fe444, a
 # motor-current sensor gain x1.82 beside a backlash, read as beam damping, its motor current left at 2.82 x
 CURVE_VARIANCE = 0.2  # a static curve of a channel's own value that takes this much of its residual's variance
-# (in noise variances), or is this far beyond its own sampling spread (CURVE_SIGNIFICANCE) ...
-CURVE_SIGNIFICANCE = 20.0  # the curve's gain over what chance gives two regressors on that many independent samples:
-# F = gain n_eff / (2 s^2) is ~ Exp(1) without a curve (chi-square with 2 degrees of freedom, halved): P(F > 20) = 2e-9,
+# (in noise variances), or bends away from the line (CURVE_BEND), and is this far beyond its own sampling spread ...
+CURVE_SIGNIFICANCE = 100.0  # the curve's gain over what chance gives two regressors on that many independent samples:
+# F = gain n_eff / (2 s^2) is ~ Exp(1) without a curve (chi-square with 2 degrees of freedom, halved): P(F > 20) = 2e-9
+# on white noise, but a smooth residual's n_eff is an estimate: a closed loop that sticks elsewhere reached 53 x chance
+# (seeds 76-84: two-joint encoders 0.6-53 x; every sensor characteristic outside the catalogue 313 x or more),
 CURVE_BEND = 5.0  # ... where it bends away from the line by this many noise sd somewhere (at the channel's peaks): a
 # characteristic, not a misfit of 1 % of the noise's variance that only many samples make significant
 CURVE_SHARE = 0.5  # ... and this share of what a gain and an offset leave above the noise: a nonlinear characteristic
@@ -164,10 +166,10 @@ def within_noise(scores_train: dict, scores_held: dict) -> bool:
 def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
     """Channels whose residual (measured - simulated, all data, in noise units) is a static curve of the channel's
     own value beyond a gain and an offset: per recording, least squares on 1 and x (x: the simulated value over its
-    peak), then also on x |x| and x^3; where, in the median over recordings, the curve takes CURVE_VARIANCE noise
-    variances, or CURVE_SIGNIFICANCE times what chance would take on the residual's independent samples
-    (effective_samples) while bending CURVE_BEND noise sd away from the line, and CURVE_SHARE of what the line leaves
-    above the noise, the channel is curved. What a sensor or an
+    peak), then also on x |x| and x^3; where, in the median over recordings, the curve takes CURVE_SIGNIFICANCE times
+    what chance would take on the residual's independent samples (effective_samples) and CURVE_VARIANCE noise variances
+    or bends CURVE_BEND noise sd away from the line, and CURVE_SHARE of what the line leaves above the noise, the
+    channel is curved. What a sensor or an
     amplifier with a nonlinear characteristic leaves, which no catalogue effect has: a gain fitted to it leaves the
     curve's residual at the peaks, small on average (seed 58, laser_arm-51359564: a motor current reading +50 % at
     its peak, x^3, 'explained' by a gain x1.141 at 1.14 x the noise; the curve takes 0.25 noise variances, 98 % of
@@ -179,7 +181,16 @@ def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
     noise variances, below CURVE_VARIANCE, but 290-390 times chance on a white sensor noise, bending 14-15 noise sd
     from the line at the current's peaks. Of its 11 other cases scored, every channel at most 11.5 times chance but one:
     a laser pair's motor current left by Coulomb friction fitted for a Stribeck friction, 28.5 times chance at 67 % of
-    the excess, but 0.010 noise variances, bending 1.3-2.2 noise sd."""
+    the excess, but 0.010 noise variances, bending 1.3-2.2 noise sd.
+    Significance is asked of a large curve too: what a sensor's characteristic leaves beside the curve is its white
+    noise, many independent samples, while a dynamic misfit (a closed loop that sticks a little elsewhere) leaves a
+    smooth residual that a cubic of a slowly moving value follows by chance. Stored reports of seeds 76-84: every
+    outside-catalogue case's curved channel 313-841,785 times chance (bending 13.9-243 noise sd; 0.10-1,133 noise
+    variances); two-joint Watflex cases with the truth's effect found or none, their encoders and gauges 0.6-53 times
+    chance at 0.21-45 noise variances (seed 83's watflex-490a4521, an 11 ms delay found and the final model within
+    the noise, `unexplained` by its shoulder encoder at 0.81 noise variances, 3.7 times chance; its watflex-da294670,
+    an elbow gain found and the model at 1.08 x, by its elbow encoder at 1.55 noise variances, 35 times chance); hence
+    CURVE_SIGNIFICANCE 100, between the two."""
     rows: dict[str, list[tuple[float, float, float, float]]] = {}  # line, curve (noise variances left), significance, bend
     for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
         for c in chans:
@@ -200,8 +211,8 @@ def curved_channels(data: Data, sims: list[Recording]) -> list[dict]:
     for c, values in rows.items():
         line, curve, significance, bend = np.median(np.array(values), axis=0)
         share = (line - curve) / (line - 1.0) if line > 1.0 else 0.0
-        small = significance >= CURVE_SIGNIFICANCE and bend >= CURVE_BEND
-        if (line - curve >= CURVE_VARIANCE or small) and share >= CURVE_SHARE:
+        large = line - curve >= CURVE_VARIANCE or bend >= CURVE_BEND
+        if significance >= CURVE_SIGNIFICANCE and large and share >= CURVE_SHARE:
             out.append({"channel": c, "noise_ratio": math.sqrt(line), "with_curve": math.sqrt(curve), "share": float(share),
                         "significance": float(significance), "bend": float(bend)})
     return out
