@@ -917,8 +917,8 @@ def test_the_refit_compass_runs_only_near_the_noise():
 def test_the_final_model_is_carried_on_by_a_pattern_search_near_the_noise(monkeypatch):
     """pattern.pattern_polish (settle, before the verdict): the final model short of the noise but near it is searched
     on, and the search kept where validation is no worse. Figures of seed 83's two-joint watflex-490a4521 (an 11 ms
-    command delay, found): training 1.47 x (elbow torque 1.64 x), validation 1.87 x (elbow encoder 3.41 x); the search
-    measured from there: 0.78 x and 0.84 x (encoder 0.98 x). Not searched: a model within the noise, or one 11.7 x
+    command delay, found): training 1.47 x (elbow torque 1.64 x), validation 1.87 x (elbow encoder 3.41 x); searched
+    from there to its end: 0.78 x and 0.84 x (tip 0.86 x and 0.98 x). Not searched: a model within the noise, or one 11.7 x
     off (compass_worth); refused: a search that leaves validation worse."""
     from watflex_sim.diagnosis import pattern
     from watflex_sim.diagnosis.data import Data, Model

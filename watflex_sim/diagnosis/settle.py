@@ -9,7 +9,8 @@ its final model does not need it on validation (validate.eliminate) or its inter
 without it is not far worse (validate.vague_findings); what is left is refit on the training blocks, from the round's
 fit of the same findings if there was one, and the floors measured again without the dropped (refit.floors_after_dropping)
 where a finding had raised them. Before it is judged, a model short of the noise but near it is carried on by the
-pattern search on the training blocks (pattern.pattern_polish). `steps` and `rejected` (the report's lists) get what happened appended.
+pattern search on the training blocks (pattern.pattern_polish). `steps` and `rejected` (the report's lists) get what
+happened appended.
 """
 from __future__ import annotations
 
