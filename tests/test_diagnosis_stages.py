@@ -1062,6 +1062,9 @@ def test_the_polish_also_starts_from_the_rig_as_its_datasheet_says(monkeypatch):
         def simulate(self, model):
             return 1.0 + 50 * abs(model.parameters["beam_EI"] - 1.0)  # stands for the training noise ratio
 
+        def simulate_models(self, models):
+            return [self.simulate(m) for m in models]
+
     free = [Slot(("effect", 0, "width"), 1e-5, 0.5, log=True), Slot(("param", "beam_EI"), 0.95, 1.05)]
     found = Model([{"effect": "backlash", "where": "hub", "width": 2.9e-4, "position": 0.9}], {"beam_EI": 1.009})
     result = {"model": found, "free": free, "train": {"noise_ratio": Runner().simulate(found)}}
@@ -1704,6 +1707,37 @@ def test_the_candidate_fits_simulations_go_together_call_by_call():
     assert sorted(errors) == [(0, "worker failed"), (1, "worker failed")]
 
 
+def test_a_model_simulated_a_moment_ago_is_not_simulated_again(laser_recordings, monkeypatch):
+    """runner.evaluator: a residual asked for again (the same model, part, unit and fidelity) comes from the runner's
+    memo (Runner.remember) without a simulation job, equal to the first to the bit and a copy of it; a model asked
+    twice in one call is simulated once; the noise units follow this process' noise as it changes (calibrate_noise);
+    past MEMO_BYTES of others the first is simulated again."""
+    from watflex_sim.diagnosis import runner as runner_module
+    from watflex_sim.diagnosis.runner import Runner, evaluator
+
+    data = prepare(laser_recordings, ["pos", "neg"])
+    payload = Model([{"effect": "payload", "where": "tip", "mass": 0.1}])
+    with Runner(data, 1) as runner:
+        evaluate = evaluator(runner)
+        first = evaluate([payload])[0]
+        jobs = runner.jobs
+        again, twice = evaluate([Model([dict(payload.effects[0])]), payload])
+        assert runner.jobs == jobs and np.array_equal(again, first) and np.array_equal(twice, first) and again is not first
+        again[:] = 0.0  # the caller's to change
+        assert np.array_equal(evaluate([payload])[0], first)
+        evaluate([Model(), Model()])
+        assert runner.jobs == jobs + len(laser_recordings)  # one model, once
+        in_noise = evaluator(runner, unit="noise")
+        before = in_noise([payload])[0]
+        runner.data.noise[:] = [{c: 2 * v for c, v in n.items()} for n in data.noise]
+        assert np.allclose(in_noise([payload])[0], before / 2)
+        monkeypatch.setattr(runner_module, "MEMO_BYTES", 8 * first.nbytes)  # eight residuals
+        evaluate([Model(parameters={"beam_EI": 1 + k * 1e-4}) for k in range(8)])
+        jobs = runner.jobs
+        evaluate([payload])
+        assert runner.jobs == jobs + len(laser_recordings)
+
+
 def test_motion_is_the_reference_where_no_measured_joint_moves():
     """motion_channel(): seed 59's watflex-1e32daae (single-link set-up, shoulder locked, the elbow encoder
     left out: seen through the strains only) had every residual window labelled "near zero velocity
@@ -1935,14 +1969,16 @@ def test_a_round_whose_candidate_does_not_stand_the_coarse_model_is_fitted_as_fi
     are all smooth (a tip payload) stays coarse and untouched; one with a candidate that the coarse model misjudges
     (the demo's gear stick-slip, beyond COARSE_MARGIN x the noise from its own, as in keep_fidelity's test) goes to
     the model's own fidelity before the round chooses: every candidate carried on there (refine.carry_on, stubbed
-    here) and the current model's simulations returned as fine, so the candidates' gains are against like."""
+    here: refine.carry_on_each) and the current model's simulations returned as fine, so the candidates' gains are against
+    like."""
     from watflex_sim.diagnosis import refit
     from watflex_sim.diagnosis.effect_fit import scored
     from watflex_sim.diagnosis.runner import Runner
     from watflex_sim.diagnosis.screening import SCREEN_FINER
 
     carried = []
-    monkeypatch.setattr(refit, "carry_on", lambda data, runner, result: carried.append(result) or {**result, "carried": True})
+    monkeypatch.setattr(refit, "carry_on_each", lambda data, runner, items: [
+        carried.append(result) or {**result, "carried": True} for result, _ in items])
     steps = [simulate(load_scenario("laser_arm_step", [f"direction={d}", "duration_s=2.0", f"seed={i}"])).recording
              for i, d in enumerate(("positive", "negative"))]
     data = prepare(steps, ["a.csv", "b.csv"])

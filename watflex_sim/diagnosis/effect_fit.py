@@ -12,7 +12,6 @@ model's simulations (scored by the caller, `scored`).
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 
@@ -20,7 +19,7 @@ from ..recording import Recording
 from .data import Data, Model
 from .fitting import (Slot, at_internal, effect_slots_of, internal_start, jacobian, levenberg, refit_cost,
                       rig_slots, value_of)
-from .runner import Gathered, Runner, evaluator, in_units
+from .runner import Runner, evaluator, in_units, run_gathered
 from .scan import PERIOD_LADDER, beside, period_scans, same_rung, scan_shape
 from .scores import fit_scores
 from .screening import Candidate
@@ -100,30 +99,13 @@ def restep(evaluate, cand: Candidate, free: list[Slot], model: Model, cost: floa
 def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidate], rig_columns: np.ndarray, iters: int,
                    per: np.ndarray) -> list[dict]:
     """`fit_candidate` for every candidate at once, in the order given, each with its fitted model's simulations
-    ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.Gathered:
+    ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.run_gathered:
     the k-th call of every fit in one lockstep call): one fit per worker left a worker idle once its fit ended or
     when the fits outnumbered the workers (3 on 2). The same simulations as one fit per worker, so the same results
     to the digit. A candidate's second fit ('also': a ripple from the scan beside the others) follows its first."""
-    gathered = Gathered(in_units(evaluator(runner), per), len(cands))
     rig_columns = rig_columns / per[:, None]  # in noise units, as the fits' residuals
-    results: list = [None] * len(cands)
-
-    def work(k: int) -> None:
-        try:
-            results[k] = fit_candidate(data, gathered.caller(k), base, cands[k], rig_columns, iters, cands)
-        except BaseException as exc:  # noqa: BLE001 - raised again below, in the caller's thread
-            results[k] = exc
-        finally:
-            gathered.leave()
-
-    threads = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(len(cands))]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join()
-    failed = next((r for r in results if isinstance(r, BaseException)), None)
-    if failed is not None:
-        raise failed
+    results = run_gathered(in_units(evaluator(runner), per), [
+        lambda evaluate, cand=cand: fit_candidate(data, evaluate, base, cand, rig_columns, iters, cands) for cand in cands])
     results = [fit for r in results for fit in [r, *r.pop("also", [])]]  # a ripple's fit from the scan beside the others
     fitted = [r for r in results if "model" in r]
     for result, sims in zip(fitted, runner.simulate_models([r["model"] for r in fitted])):

@@ -16,7 +16,7 @@ from .explain import units_at
 from .fitting import Slot, effect_slots_of, levenberg, rig_slots, unpack, value_of
 from .motion import scale_of
 from .period import neutral_others, period_profile, periodic_name, profile_ladder
-from .runner import Runner, evaluator, in_units
+from .runner import Runner, evaluator, in_units, run_gathered
 from .scan import PERIOD_CHECKED, period_ladder
 from .scores import fit_scores
 from .validate import earns_place, gains, rival
@@ -90,26 +90,38 @@ def carry_on(data: Data, runner: Runner, result: dict, rig_start: dict[str, floa
     datasheet's values the same fit reaches 0.84 x with every ratio within 0.13 % of 1. A Watflex elbow
     Coulomb friction of 0.54 N m, from the refit rig: 0.29 N m with the friction scale at its bound;
     from the datasheet: 0.51 N m)."""
-    free = result["free"]
-    start = [value_of(result["model"], s) for s in free]
-    model, cost, J = levenberg(in_noise(data, runner), result["model"], free, start, None, POLISH_ITERATIONS)
-    moved = [value_of(model, s) for s in free] != start
-    out = result
-    if moved:
-        sims = runner.simulate(model)
-        out = result if sims is None else scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
-    if rig_start is None:
-        return out
-    restart = Model([dict(e) for e in result["model"].effects], dict(rig_start))
-    restart = unpack([min(max(value_of(restart, s), s.low), s.high) for s in free], free, restart)
-    if restart.parameters == result["model"].parameters:
-        return out
-    model, cost, J = levenberg(in_noise(data, runner), restart, free, [value_of(restart, s) for s in free], None, POLISH_ITERATIONS)
-    sims = runner.simulate(model)
-    if sims is None:
-        return out
-    other = scored(data, {**result, "model": model, "cost": cost, "J": J}, sims)
-    return other if other["train"]["noise_ratio"] < out["train"]["noise_ratio"] else out
+    return carry_on_each(data, runner, [(result, rig_start)])[0]
+
+
+def carry_on_each(data: Data, runner: Runner, items: list[tuple[dict, dict[str, float] | None]]) -> list[dict]:
+    """`carry_on(data, runner, result, rig_start)` for each (result, rig_start) of `items`, every fit at once: each
+    Levenberg-Marquardt run in a thread of its own, their simulations gathered (runner.run_gathered), the fitted
+    models simulated in one call; the same results as one after another."""
+    runs = []  # (item index, start model, free slots)
+    for k, (result, rig_start) in enumerate(items):
+        runs.append((k, result["model"], result["free"]))
+        if rig_start is not None:
+            free = result["free"]
+            restart = Model([dict(e) for e in result["model"].effects], dict(rig_start))
+            restart = unpack([min(max(value_of(restart, s), s.low), s.high) for s in free], free, restart)
+            if restart.parameters != result["model"].parameters:
+                runs.append((k, restart, free))
+    fits = run_gathered(in_noise(data, runner), [
+        lambda evaluate, start=start, free=free: levenberg(evaluate, start, free, [value_of(start, s) for s in free], None,
+                                                           POLISH_ITERATIONS) for _, start, free in runs])
+    first = [j == 0 or runs[j - 1][0] != k for j, (k, _, _) in enumerate(runs)]  # the run from the fit itself
+    moved = [not f or [value_of(model, s) for s in free] != [value_of(start, s) for s in free]
+             for f, (model, _, _), (_, start, free) in zip(first, fits, runs)]  # a restart is simulated always
+    simulated = iter(runner.simulate_models([model for (model, _, _), m in zip(fits, moved) if m]))
+    out = [result for result, _ in items]
+    for f, m, (model, cost, J), (k, _, _) in zip(first, moved, fits, runs):
+        sims = next(simulated) if m else None
+        if sims is None:
+            continue
+        other = scored(data, {**items[k][0], "model": model, "cost": cost, "J": J}, sims)
+        if f or other["train"]["noise_ratio"] < out[k]["train"]["noise_ratio"]:
+            out[k] = other
+    return out
 
 
 def rescan_ripples(data: Data, runner: Runner, result: dict) -> dict:

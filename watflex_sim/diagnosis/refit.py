@@ -28,7 +28,7 @@ from .effect_fit import scored
 from .fitting import Slot, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
 from .pattern import compass_worth, pattern_search
-from .refine import POLISH_ITERATIONS, carry_on, in_noise
+from .refine import POLISH_ITERATIONS, carry_on_each, in_noise
 from .runner import Runner, evaluator, in_units
 from .scores import channel_ratios, fit_scores
 from .screening import SCREEN_FINER
@@ -157,8 +157,9 @@ def fine_for_round(data: Data, runner: Runner, current: Model, sims: list[Record
     say("fidelity", f"{which['effect']} at {which['where']} simulated {SCREEN_FINER:g} x as fine is {worst:.2f} x the noise "
         f"from its own (more than {COARSE_MARGIN:g} x): simulating as fine as the rig's model from now on, the round's "
         "candidates carried on there")
-    carried = [carry_on(data, runner, scored(data, r, f)) if f is not None else r for (f, _), r in zip(checked, results)]
-    return carried, now
+    fine = [k for k, (f, _) in enumerate(checked) if f is not None]
+    carried = dict(zip(fine, carry_on_each(data, runner, [(scored(data, results[k], checked[k][0]), None) for k in fine])))
+    return [carried.get(k, r) for k, r in enumerate(results)], now
 
 
 def _as_fine(data: Data, runner: Runner, models: list[Model], coarse: list[list[Recording]]

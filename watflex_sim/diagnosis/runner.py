@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import threading
+from collections import OrderedDict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
@@ -28,6 +29,8 @@ from ..resim import finer_discretisation, resimulate_many, scenario_from_recordi
 from .data import Data, Model, in_part, residual_vector
 
 log = logging.getLogger(__name__)
+
+MEMO_BYTES = 64e6  # residuals kept by the runner, the latest (Runner.remember): 0.1 MB each for three 6 s recordings
 
 
 def last_time(rec: Recording, train: np.ndarray, part: str) -> float | None:
@@ -112,8 +115,20 @@ class Runner:
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
         self.fidelity = 1.0  # every simulation this many times as fine as the rig's model (refit.choose_fidelity)
         self.workers = workers if workers > 1 else 1
+        self.memo: OrderedDict = OrderedDict()  # the latest residuals `evaluator` computed (MEMO_BYTES), by model and part
+        self.memo_bytes = 0
         self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C
                      if workers > 1 else None)
+
+    def remember(self, key: tuple, residual: np.ndarray | None) -> None:
+        """Keep a model's residual (`evaluator`'s key: the model, part, unit and fidelity; None: it diverged) among the
+        latest MEMO_BYTES: a fit asks again for a model it has just simulated (a carried-on fit's start, a scan's given
+        values, a step search's rounded start), ~4 % of a diagnosis' simulations and most of them a call of their own."""
+        self.memo[key] = residual
+        self.memo_bytes += 0 if residual is None else residual.nbytes
+        while self.memo_bytes > MEMO_BYTES:
+            old = self.memo.popitem(last=False)[1]
+            self.memo_bytes -= 0 if old is None else old.nbytes
 
     def map(self, fn, jobs: list) -> list:
         """fn over jobs, in order; reports progress as jobs finish."""
@@ -195,12 +210,16 @@ def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread", 
     def evaluate(models):
         n = len(runner.data.recordings)
         factor = finer * runner.fidelity
-        pieces = runner.lockstep(_pieces, [(m, i, part, unit, factor) for m in models for i in range(n)])
-        out = []
-        for k in range(len(models)):
+        here = () if runner.pool else (id(held()), repr(held().noise) if unit == "noise" else "")  # this process' data
+        keys = [(repr(m.effects), repr(sorted(m.parameters.items())), part, unit, factor, *here) for m in models]
+        known = {key: runner.memo[key] for key in keys if key in runner.memo}
+        todo = list({key: m for key, m in zip(keys, models) if key not in known}.items())
+        pieces = runner.lockstep(_pieces, [(m, i, part, unit, factor) for _, m in todo for i in range(n)]) if todo else []
+        for k, (key, _) in enumerate(todo):
             mine = pieces[k * n:(k + 1) * n]
-            out.append(None if any(p is None for p in mine) else np.concatenate(mine))
-        return out
+            known[key] = None if any(p is None for p in mine) else np.concatenate(mine)
+            runner.remember(key, known[key])
+        return [None if known[key] is None else known[key].copy() for key in keys]
     return evaluate
 
 
@@ -250,6 +269,33 @@ class Gathered:
                 self.answers[k], start = out[start:start + len(self.waiting[k])], start + len(self.waiting[k])
         self.waiting.clear()
         self.cond.notify_all()
+
+
+def run_gathered(evaluate, works: list) -> list:
+    """work(its evaluator) for each of `works`, each in a thread of its own, their calls to `evaluate` gathered
+    (`Gathered`): the same simulations, so the same results, as running them one after another, in fewer and larger
+    lockstep calls (a single model's call is ~4 x the cost per simulation of one of 50). The results in order; the
+    first error of a work is raised here."""
+    gathered = Gathered(evaluate, len(works))
+    results, errors = [None] * len(works), [None] * len(works)
+
+    def run(k: int) -> None:
+        try:
+            results[k] = works[k](gathered.caller(k))
+        except BaseException as exc:  # noqa: BLE001 - raised again below, in the caller's thread
+            errors[k] = exc
+        finally:
+            gathered.leave()
+
+    threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in range(len(works))]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    failed = next((e for e in errors if e is not None), None)
+    if failed is not None:
+        raise failed
+    return results
 
 
 def in_units(evaluate, per: np.ndarray):
