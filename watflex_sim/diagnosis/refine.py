@@ -97,32 +97,31 @@ def carry_on_each(data: Data, runner: Runner, items: list[tuple[dict, dict[str, 
     """`carry_on(data, runner, result, rig_start)` for each (result, rig_start) of `items`, every fit at once: each
     Levenberg-Marquardt run in a thread of its own, their simulations gathered (runner.run_gathered), the fitted
     models simulated in one call; the same results as one after another."""
-    runs = []  # (item index, start model, free slots)
+    runs = []  # (item index, start model, whether it starts from rig_start)
     for k, (result, rig_start) in enumerate(items):
-        runs.append((k, result["model"], result["free"]))
+        runs.append((k, result["model"], False))
         if rig_start is not None:
             free = result["free"]
             restart = Model([dict(e) for e in result["model"].effects], dict(rig_start))
             restart = unpack([min(max(value_of(restart, s), s.low), s.high) for s in free], free, restart)
             if restart.parameters != result["model"].parameters:
-                runs.append((k, restart, free))
+                runs.append((k, restart, True))
+    values = lambda model, k: [value_of(model, s) for s in items[k][0]["free"]]  # noqa: E731
     fits = run_gathered(in_noise(data, runner), [
-        lambda evaluate, start=start, free=free: levenberg(evaluate, start, free, [value_of(start, s) for s in free], None,
-                                                           POLISH_ITERATIONS) for _, start, free in runs])
-    first = [j == 0 or runs[j - 1][0] != k for j, (k, _, _) in enumerate(runs)]  # the run from the fit itself
-    moved = [not f or [value_of(model, s) for s in free] != [value_of(start, s) for s in free]
-             for f, (model, _, _), (_, start, free) in zip(first, fits, runs)]  # a restart is simulated always
-    simulated = iter(runner.simulate_models([model for (model, _, _), m in zip(fits, moved) if m]))
+        lambda evaluate, k=k, start=start: levenberg(evaluate, start, items[k][0]["free"], values(start, k), None,
+                                                     POLISH_ITERATIONS) for k, start, _ in runs])
+    simulate = [restart or values(model, k) != values(start, k)  # a restart is simulated always, a fit where it moved
+                for (k, start, restart), (model, _, _) in zip(runs, fits)]
+    simulated = iter(runner.simulate_models([model for (model, _, _), s in zip(fits, simulate) if s]))
     out = [result for result, _ in items]
-    for f, m, (model, cost, J), (k, _, _) in zip(first, moved, fits, runs):
-        sims = next(simulated) if m else None
+    for (k, _, restart), (model, cost, J), s in zip(runs, fits, simulate):
+        sims = next(simulated) if s else None
         if sims is None:
             continue
         other = scored(data, {**items[k][0], "model": model, "cost": cost, "J": J}, sims)
-        if f or other["train"]["noise_ratio"] < out[k]["train"]["noise_ratio"]:
+        if not restart or other["train"]["noise_ratio"] < out[k]["train"]["noise_ratio"]:
             out[k] = other
     return out
-
 
 def rescan_ripples(data: Data, runner: Runner, result: dict) -> dict:
     """`result` with each ripple's period scanned again in the polished model (period.period_profile over
