@@ -20,12 +20,10 @@ from .data import Data, Model
 from .motion import motions
 from .refine import parameter_count, refit_in_place, scores_without
 from .runner import Runner
-from .screening import make_candidate
+from .screening import CURVE_LAWS, make_candidate
 from .validate import gains
 
 
-CURVE_LAWS = ("coulomb_friction", "stribeck_friction", "viscous_friction")  # effects that change a joint's friction
-# only through its sliding curve F(v) (friction.exponential), so that one can be matched to another's
 CURVE_SPEEDS = 2000  # joint speeds (of the simulated motion) a law's curve is matched on, at most
 SPEED_WINDOW_S = 0.02  # s: a joint's speed is the slope of a quadratic over this long (Savitzky-Golay)
 CURVE_STARTS = 7  # a log-scaled parameter (a Stribeck speed) is started at this many values over its bounds

@@ -42,6 +42,9 @@ SIMULATED_TIE = 0.8  # a candidate rescreen simulated at this share of the best 
 # compliance's 86 %; fitted, it explains validation as well as the compliance, 0.876 against 0.880 x the noise)
 MIN_GAIN = 0.02  # a finding's training noise ratio must fall by this fraction per fitted parameter (validate.gains: the
 # score's charge per parameter); a simpler law at the leader's place is fitted if it screens at this per parameter
+CURVE_LAWS = ("coulomb_friction", "stribeck_friction", "viscous_friction")  # effects that change a joint's friction
+# only through its sliding curve F(v) (friction.exponential): each other's nearest rivals at one joint (shortlist,
+# laws.one_law)
 SCREEN_FINER = 0.5  # signatures are simulated this many times as fine as the model (half the segments, twice the
 # step where that divides the control period): a screening column is a difference of two simulations at one
 # discretisation, which cancels most of its error; the rescreen and the fits then simulate as fine as the model
@@ -322,8 +325,9 @@ def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Can
     """The candidates to fit in full, from those ranked by screening gain: the first `screen_top`
     that explain anything, any more (to SCREEN_MAX) within SCREEN_TIE of the last of them, and the
     best-screening simpler law at the leader's place (fewer parameters, a screening gain of at least
-    what its parameters will be charged, MIN_GAIN each). One that `rescreen` found worse than no effect
-    at its estimate and half-way gives its place to the best it found better; the best one the simulations put within
+    what its parameters will be charged, MIN_GAIN each), and a friction law's best-screening rival law (`rival_law`).
+    One that `rescreen` found worse than no effect at its estimate and half-way gives its place to the best it found
+    better; the best one the simulations put within
     SIMULATED_TIE of the best listed one is fitted too (seed 44, a laser beam 0.39 x as stiff: the beam's stiffness
     screened third at 55 % and simulated first at 80 %, against 70-72 % for the hub's compliance and backlash, which
     were fitted, and the compliance was found). A signature is a linear picture and
@@ -338,7 +342,24 @@ def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Can
         top.append(spare.pop(0))
     simpler = [c for c in ranked if top and c not in top and c.where == top[0].where
                and len(c.slots) < len(top[0].slots) and c.gain >= MIN_GAIN * len(c.slots)]
-    return top + simpler[:1]
+    top += simpler[:1]
+    return top + rival_law(ranked, top)
+
+
+def rival_law(ranked: list[Candidate], listed: list[Candidate]) -> list[Candidate]:
+    """Where the leader of `listed` is a friction law (CURVE_LAWS) and no other is listed at its joint: the
+    best-screening other law there that screens at MIN_GAIN per parameter, whatever `rescreen` simulated for it (a
+    list of at most one). Friction laws at one joint are each other's nearest rivals and a signature, a linear
+    picture of stick-slip, ranks them by chance (seed 86, laser_arm-4d9d7591, a hub Stribeck friction of break-away
+    0.045 / 0.049 N m decaying by 0.024 rad/s: screened at 28 % and simulated at -13 % at its linear estimate beside
+    the Coulomb friction's 87 % / 76 %, it was never fitted, and the Coulomb friction was named at 0.89 x the noise
+    with no alternative given)."""
+    leader = listed[0] if listed else None
+    if leader is None or leader.effect not in CURVE_LAWS or any(
+            c.effect in CURVE_LAWS and c.where == leader.where for c in listed[1:]):
+        return []
+    return [c for c in ranked if c not in listed and c.effect in CURVE_LAWS and c.where == leader.where
+            and c.gain >= MIN_GAIN * len(c.slots)][:1]
 
 
 def concealed(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: np.ndarray, r: np.ndarray,
