@@ -901,6 +901,31 @@ def test_with_training_within_the_noise_validation_decides():
     assert shortfall(fitted(0.8558, 0.8600, 0.8792, 0.95), later=False) != ""  # training worse
 
 
+def test_a_later_finding_far_from_the_noise_pays_its_parameters_on_both_parts():
+    """validate.far_gain: the Quanser 2DSFL's real recordings (docs/rigs.md, 2026-12-03 at 9025277), link 2's stiffness
+    found, training 881.6 x and validation 900.5 x the noise: a drive-1 compliance (1 parameter) took training 18.3 % and
+    validation 15.4 % lower, 15 % of the excess, and was refused by MIN_EXCESS_GAIN (25 %). Its round began beyond
+    FAR_FROM_NOISE, so it earns its place; a backlash there (2 parameters: 2.8 % / 2.4 %, under 2 x MIN_GAIN = 4 %)
+    does not, nor do the compliance's gains in a round begun at 12 x the noise (a benchmark pair's scale)."""
+    from watflex_sim.diagnosis.validate import FAR_FROM_NOISE, MIN_GAIN, gains, shortfall
+
+    def scores(mean):
+        return {"noise_ratio": mean, "worst_channel": "link1", "worst_ratio": mean, "channel_ratios": {"link1": mean}}
+
+    def fitted(train_before, held_before, train_gain, held_gain, n_params):
+        result = {"train": scores(train_before * (1 - train_gain)), "held_out": scores(held_before * (1 - held_gain)),
+                  "n_params": n_params}
+        return gains(result, scores(train_before), scores(held_before))
+
+    compliance = fitted(881.6, 900.5, 0.183, 0.154, 1)
+    assert compliance["excess_gain"] == pytest.approx(0.154, abs=0.001)  # the bar it used to miss
+    assert shortfall(compliance, later=True) == "" and shortfall(compliance, later=False) == ""
+    backlash = fitted(881.6, 900.5, 0.028, 0.024, 2)
+    assert 2 * MIN_GAIN > backlash["held_gain"] and shortfall(backlash, later=True) != ""
+    near = fitted(12.0, 12.0 * 0.98, 0.183, 0.154, 1)
+    assert near["held_before"] < FAR_FROM_NOISE and "a later finding must remove 25 %" in shortfall(near, later=True)
+
+
 def test_the_refit_compass_runs_only_near_the_noise():
     """compass_worth(): the refit's pattern search is for a refit short of the noise on some channel
     (a clean Watflex case at 2.2 x), not for one far off (a 0.33 kg payload left the refit at 11.7 x:

@@ -158,7 +158,9 @@ def test_diagnosis_finds_the_soft_link_but_not_the_friction_at_drive_2():
     each recording's split was salted with its content (2026-11-27), drive 1's joint compliance then
     (23 % of the validation excess against the 25 % bar), as on the full runs (docs/rigs.md), drive 2's
     viscous friction since the blocks are split in pairs (training 2.5 %, validation 1.4 %; its Coulomb
-    friction next). This test pins that disagreement, it does not endorse it."""
+    friction next), drive 2's backlash since a later finding far from the noise pays its parameters instead
+    (validate.far_gain, 2026-12-04: 2.5 % / 2.6 %, under the 4 % its two parameters cost; the full runs take drive
+    1's compliance there, docs/rigs.md). This test pins that disagreement, it does not endorse it."""
     from watflex_sim.diagnosis import diagnose
     from watflex_sim.recording import Recording
 

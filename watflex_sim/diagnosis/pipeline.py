@@ -42,8 +42,8 @@ from .scores import fit_scores, noise_nrmse, noise_table, step
 from .screening import SCREEN_TOP, candidates, concealed, make_candidate, screen, shortlist, signatures, with_findings
 from .settle import settle
 from .tolerance import at_bounds, beyond_tolerance
-from .validate import (NOISE_MARGIN, curved_channels, earns_place, explained_share, gains, near_place, rival, shortfall,
-                       verdict_of, verdict_reason, within_noise)
+from .validate import (NOISE_MARGIN, curved_channels, earns_place, explained_share, far_gain, gains, near_place, rival,
+                       shortfall, verdict_of, verdict_reason, within_noise)
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
@@ -220,7 +220,9 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                          if places(r) != places(best) and rival(r, best, later, data.absorbable)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
-            f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise")
+            f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise"
+            + (f" (far from the noise: {100 * best['train_gain']:.1f} % better on training, {100 * best['held_gain']:.1f} % "
+               f"on validation, {100 * best['excess_gain']:.0f} % of its excess)" if later and far_gain(best) else ""))
         current, sims = best["model"], best["sims"]
         coarse = runner.fidelity
         sims = keep_fidelity(data, runner, current, sims, say)  # a finding may not stand the coarser model

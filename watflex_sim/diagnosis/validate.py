@@ -3,7 +3,8 @@
 Contract: a fitted candidate is scored by `gains` against the model before it (training and validation noise ratios,
 the share of validation's excess over the noise it removes); it earns its place (`shortfall` says why not) when
 training falls by MIN_GAIN per parameter and validation by MIN_HELD_GAIN, and a later finding also removes
-MIN_EXCESS_GAIN of what validation has above the noise (with training already within the noise, removing
+MIN_EXCESS_GAIN of what validation has above the noise, or where validation is FAR_FROM_NOISE x the noise gains on
+training and validation what its parameters cost (far_gain) (with training already within the noise, removing
 MIN_EXCESS_GAIN of validation's excess without making training worse is enough; in a round asked for by windows far
 above their local null, locate.local_excess, removing LOCAL_GAIN of their excess). `rival` says which other fitted
 candidates are alternatives to the chosen one. `eliminate` drops findings the final model does not need on validation
@@ -51,6 +52,11 @@ CURVE_BEND = 5.0  # ... where it bends away from the line by this many noise sd 
 # characteristic, not a misfit of 1 % of the noise's variance that only many samples make significant
 CURVE_SHARE = 0.5  # ... and this share of what a gain and an offset leave above the noise: a nonlinear characteristic
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's: an alternative
+FAR_FROM_NOISE = 20.0  # validation this many times the noise (mean over channels) before a later round: the residual is
+# the model's error, not the recordings' noise (a real rig: the Quanser 2DSFL at 900 x after its refit), and a share of
+# its excess over the noise is a share of the whole error, which one real effect among a real rig's many rarely removes.
+# A benchmark case can start far above it (seed 88: a Watflex link 2 x3.3 as stiff at 88 x, a structural damping x14
+# with a payload at 36 x), but its later rounds began at most at 8.3 x (seeds 86-88), where MIN_EXCESS_GAIN holds
 LOCAL_GAIN = 0.5  # in a round asked for by windows far above their local null (locate.local_excess), a finding must
 # remove this share of their excess, without making training or validation worse
 
@@ -62,7 +68,7 @@ def gains(result: dict, train_now: dict, held_now: dict) -> dict:
     train_gain = (train_now["noise_ratio"] - result["train"]["noise_ratio"]) / train_now["noise_ratio"]
     held_gain = (held_now["noise_ratio"] - result["held_out"]["noise_ratio"]) / held_now["noise_ratio"]
     return {**result, "train_gain": train_gain, "held_gain": held_gain, "excess_gain": excess_gain(held_now, result["held_out"]),
-            "train_within": train_now["noise_ratio"] <= NOISE_MARGIN,
+            "train_within": train_now["noise_ratio"] <= NOISE_MARGIN, "held_before": held_now["noise_ratio"],
             "score": train_gain + held_gain - MIN_GAIN * result["n_params"]}
 
 
@@ -120,11 +126,24 @@ def rival(result: dict, chosen: dict, later: bool, absorbable: float) -> bool:
         ratio <= 1.0 and best <= 1.0 and ratio**2 - best**2 <= absorbable and earns_place(result, later))
 
 
+def far_gain(result: dict) -> bool:
+    """Whether a later candidate, its round begun with validation FAR_FROM_NOISE x the noise or more, gains on training
+    and on validation what a finding's parameters cost (MIN_GAIN each, on both): far from the noise that is evidence
+    enough. The Quanser 2DSFL's real recordings (tests/data/quanser_2dsfl), link 2's stiffness found, validation at
+    900 x the noise: a compliance at drive 1 made training 18 % and validation 15 % better, 15 % of the excess, and
+    was refused by MIN_EXCESS_GAIN, which near the noise keeps a second effect from absorbing the first one's
+    imperfect fit."""
+    cost = MIN_GAIN * result["n_params"]
+    return (result.get("held_before", 0.0) >= FAR_FROM_NOISE and result["train_gain"] >= cost
+            and result["held_gain"] >= cost)
+
+
 def shortfall(result: dict, later: bool) -> str:
     """Why a fitted candidate does not earn its place, in words, or "" if it does: training must be better
     by MIN_GAIN per parameter and validation by MIN_HELD_GAIN; a `later` finding (one is in already) must
     also remove MIN_EXCESS_GAIN of what validation still has above the noise (excess_gain), so a second
-    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate).
+    effect does not merely absorb the first one's imperfect fit (stick-slip fits are approximate), unless its round
+    began far from the noise (far_gain).
     Training already within NOISE_MARGIN x the noise (`train_within`) has little left to gain: a candidate that
     removes MIN_EXCESS_GAIN of validation's excess (and MIN_HELD_GAIN of its ratio) without making training
     worse earns its place too. Seed 59's laser_arm-7cf6ef08: a beam 0.64 x as stiff, training at 0.86 x,
@@ -142,7 +161,7 @@ def shortfall(result: dict, later: bool) -> str:
         return ""
     if result["train_gain"] < MIN_GAIN * result["n_params"] or result["held_gain"] < MIN_HELD_GAIN:
         return "less than its parameters' cost"
-    if later and result["excess_gain"] < MIN_EXCESS_GAIN:
+    if later and result["excess_gain"] < MIN_EXCESS_GAIN and not far_gain(result):
         return (f"removes only {100 * result['excess_gain']:.0f} % of what validation has above the noise where another "
                 f"round was asked for (a later finding must remove {100 * MIN_EXCESS_GAIN:.0f} %)")
     return ""
