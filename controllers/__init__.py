@@ -20,4 +20,5 @@ from .state_feedback import StateFeedback  # noqa: E402
 CONTROLLERS["state_feedback"] = StateFeedback  # u = K (x_ref - x) on any named channels (issue 15)
 CONTROLLERS["pid"] = PID  # PID on any named channels (issue 15)
 
-__all__ = ["CascadeP", "Controller", "OpenLoop", "PDJoint", "PDTip", "PIVelocity", "PID", "StateFeedback", "CONTROLLERS"]
+__all__ = ["CascadeP", "Controller", "FuzzyPD", "Observer", "OpenLoop", "Passivity", "PDJoint", "PDTip", "PIVelocity", "PID",
+           "StateFeedback", "CONTROLLERS"]

@@ -16,7 +16,8 @@ finding is left, the rig's parameters refit in the floors' units (refit.without_
 noise of the chosen one and, when there are any, the experiment that would tell them apart. Verdict: `nothing_missing` only when
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
-`explained` when the findings bring both there, `unexplained` otherwise.
+`explained` when the findings bring both there, `unexplained` otherwise, and where a channel's residual is a static
+curve of its own value or carries a steady line the simulation does not (disturbance.steady_lines).
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ import numpy as np
 
 from ..recording import Recording
 from .data import Data, Model, prepare, residual_vector, unit_change
+from .disturbance import steady_lines
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import canonical_form, finding
 from .fitting import value_of
@@ -273,15 +275,16 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                   "ablated": ablated[i]["noise_ratio"], "held_without": ablated[i]["nrmse"]}
         findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
-    curved = curved_channels(data, sims)
-    verdict = verdict_of(current, train_f, held_f, share, curved, local)
+    curved, lines = curved_channels(data, sims), steady_lines(data, sims)
+    verdict = verdict_of(current, train_f, held_f, share, curved, local, lines)
     alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
     report = {
         "format": "flexarm-diagnosis/1",
         "rig": data.rig.name,
         "recordings": data.names,
         "verdict": verdict,
-        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local, limited),
+        "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local, limited,
+                                         lines),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -306,7 +309,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if verdict == "unexplained":
         report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
                               "validation_noise_ratio": held_f["noise_ratio"], "candidates_tried": fitted_report,
-                              "curved_channels": curved, "local_windows": local,
+                              "curved_channels": curved, "steady_lines": lines, "local_windows": local,
                               "parameters_at_bounds": report["parameters_at_bounds"]}
     if propose and alternatives:
         from .experiment import propose_experiment
