@@ -12,7 +12,7 @@ One module per stage, each with its contract in its docstring:
   effect_fit  the fit of one candidate effect (a quantised step's search; from a scan's start too)
   scan        scans of a ripple's period and of a shape parameter (a time constant): where a fit starts
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
-  disturbance a steady line in a residual that the simulation does not carry (mains hum, a fan): outside the catalogue
+  disturbance a steady line or drift in a residual that no catalogue effect makes (mains hum, a sensor's drift)
   refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
   laws        one friction law in the place of two found at one joint
   period      a ripple's period profiled: the cost with the rest re-solved at each period

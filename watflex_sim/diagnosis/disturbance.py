@@ -1,16 +1,21 @@
-"""A disturbance outside the catalogue: a steady spectral line in a channel's residual.
+"""A disturbance outside the catalogue: a steady spectral line or a steady drift in a channel's residual.
 
-Contract: `steady_lines(data, sims)` lists the channels whose final residual (measured - simulated, in noise units)
-carries one sinusoid, at the same frequency in most recordings, steady over each recording and phase-continuous, that
-the simulation does not carry near that frequency: mains hum on a bridge amplifier, a fan, a pump, a loop's limit
-cycle the model does not have. No catalogue effect makes one, so `validate.verdict_of` calls such a case `unexplained`.
+Contract: `disturbances(data, sims)` lists the channels whose final residual (measured - simulated, in noise units)
+carries, in at least half their recordings,
+- a line (`steady_lines`): one sinusoid, at one frequency, steady over each recording and phase-continuous, that the
+  simulation does not carry near that frequency: mains hum on a bridge amplifier, a fan, a pump, a loop's limit cycle
+  the model does not have;
+- a drift (`steady_drifts`): a trend in time, at the same rate in each half of the recording, through motion and rest
+  alike: a sensor or amplifier drifting (thermal), which a sensor offset only halves.
+No catalogue effect makes either, so `validate.verdict_of` calls such a case `unexplained`.
 
 Measured on the final models of seeds 86-88 (44 cases) and the off-catalogue probes of docs/diagnosis.md (a 50 Hz hum
-of 5 x the noise added to a laser tip sensor and to a Watflex strain bridge): the hums 782 and 35,891 x chance,
-steady 0.97-0.99, the simulation carrying 0.02-0.21 of their amplitude near 50 Hz; every other channel's strongest
-line at most 71 x chance, and those above 25 x carried by the simulation itself (3.1-33 x their amplitude: the
-model's own vibration, misfit). The Quanser 2DSFL's residual (a real rig, far from the noise) peaks at 104 x chance,
-at 1.7 Hz, carried by the simulation (1.1 x): its loop's own oscillation, not a line from outside.
+of 5 x the noise and a drift of 0 -> 10 x the noise over 6 s, each added to a laser tip sensor and to a Watflex strain
+bridge): the hums 12,462-32,316 x over the periodogram bins beside them, steady 0.91-0.96, the simulation carrying
+0.02-0.23 of them; every other channel's line candidate 26 x or less but one (a laser hub angle at 29 Hz, 3,578 x,
+0.011 noise variances, steady 0.08, carried 1.8 x by the simulation); the drifts 277 and 48,002 x chance, their two
+halves' rates within 5 %; every other channel's trend 22.5 x chance or less. The Quanser 2DSFL (a real rig far from
+the noise) and EMPS: neither.
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ import numpy as np
 from scipy.signal import find_peaks
 
 from .data import Data
+from .validate import effective_samples
 
 LINE_SIGNIFICANCE = 100.0  # its periodogram bin over the median of the bins beside it (white noise: an Exp(1) over
 # ln 2, at most ~12 in 3,000 bins by chance)
@@ -30,6 +36,11 @@ LINE_SIMULATED = 0.5  # ... the simulation's own line within +-20 % of its frequ
 LINE_PEAKS = 5  # the residual periodogram's peaks asked, in turn, highest over the simulation's own (a hum can be
 # smaller than a misfit at the model's vibration, which the simulation carries too)
 LINE_CYCLES = 10.0  # the lowest frequency asked: this many cycles in the recording (below it: a drift, not a line)
+DRIFT_SIGNIFICANCE = 100.0  # a trend in time: its gain over what chance gives one regressor on the residual's
+# independent samples (validate.effective_samples; without a trend ~ chi-square with 1 degree of freedom)
+DRIFT_VARIANCE = 0.05  # ... taking at least this many noise variances
+DRIFT_STEADY = 0.5  # ... the same sign in each half of the recording, the slower half's rate this share of the faster's
+# (a drift of the sensor goes on at its rate; a model that settles elsewhere after a step does not)
 
 
 def _sinusoid(t: np.ndarray, r: np.ndarray, f: float) -> tuple[float, np.ndarray, float]:
@@ -124,9 +135,72 @@ def steady_lines(data: Data, sims: list) -> list[dict]:
         f = float(np.median([row["frequency"] for row, _, _ in lines]))
         if any(abs(row["frequency"] - f) > 2.0 / span for row, _, span in lines):
             continue
-        out.append({"channel": c, "frequency_hz": f, "unit": units.get(c, ""),
+        out.append({"kind": "line", "channel": c, "frequency_hz": f, "unit": units.get(c, ""),
                     "amplitude": float(np.median([row["amplitude"] * n for row, n, _ in lines])),
                     "noise_sd": float(np.median([row["amplitude"] for row, _, _ in lines])),
                     "significance": float(np.median([row["significance"] for row, _, _ in lines])),
                     "recordings": f"{len(lines)} of {len(found)}"})
     return out
+
+
+def drift_in(t: np.ndarray, residual: np.ndarray) -> dict:
+    """One recording's trend in time: rate (noise sd per s), gain (noise variances beyond an offset), significance,
+    steadiness (the two halves' rates: the slower over the faster, negative where they differ in sign)."""
+    span = float(t[-1] - t[0])
+    x = (t - t.mean()) / span
+    coef = np.linalg.lstsq(np.column_stack([np.ones_like(x), x]), residual, rcond=None)[0]
+    left = residual - coef[0] - coef[1] * x
+    rest = float(np.mean(left**2))
+    gain = float(np.mean((residual - residual.mean()) ** 2)) - rest
+    half = t.size // 2
+    rates = [np.polyfit(x[part], residual[part], 1)[0] for part in (slice(0, half), slice(half, None))]
+    faster = max(abs(rates[0]), abs(rates[1]))
+    return {"rate": float(coef[1]) / span, "gain": gain,
+            "significance": gain * effective_samples(left) / rest if rest > 0.0 else np.inf,
+            "steady": float(min(abs(rates[0]), abs(rates[1])) / faster * np.sign(rates[0] * rates[1])) if faster > 0 else 0.0}
+
+
+def is_drift(row: dict) -> bool:
+    """Whether one recording's trend (drift_in) is a steady drift."""
+    return row["significance"] >= DRIFT_SIGNIFICANCE and row["gain"] >= DRIFT_VARIANCE and row["steady"] >= DRIFT_STEADY
+
+
+def steady_drifts(data: Data, sims: list) -> list[dict]:
+    """Channels with a steady drift (is_drift) in at least half their recordings: channel, rate (the channel's unit
+    per s and noise sd per s, the median over those recordings), significance, recordings."""
+    rows: dict[str, list[tuple[dict, float]]] = {}  # channel -> (trend, its noise)
+    for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
+        for c in chans:
+            ok = np.isfinite(rec.channels[c]) & np.isfinite(sim.channels[c])
+            if noise[c] > 0.0 and ok.sum() >= 200:
+                rows.setdefault(c, []).append((drift_in(rec.time[ok], (rec.channels[c] - sim.channels[c])[ok] / noise[c]), noise[c]))
+    units = data.rig.units()
+    out = []
+    for c, found in rows.items():
+        drifts = [(row, n) for row, n in found if is_drift(row)]
+        if drifts and 2 * len(drifts) >= len(found):
+            out.append({"kind": "drift", "channel": c, "unit": units.get(c, ""),
+                        "rate": float(np.median([row["rate"] * n for row, n in drifts])),
+                        "noise_sd_per_s": float(np.median([row["rate"] for row, _ in drifts])),
+                        "significance": float(np.median([row["significance"] for row, _ in drifts])),
+                        "recordings": f"{len(drifts)} of {len(found)}"})
+    return out
+
+
+def disturbances(data: Data, sims: list) -> list[dict]:
+    """steady_lines and steady_drifts: what the final residual carries that no catalogue effect makes."""
+    return steady_lines(data, sims) + steady_drifts(data, sims)
+
+
+def describe(found: dict) -> str:
+    """One disturbance in words, with its units."""
+    if found["kind"] == "line":
+        return (f"{found['channel']}'s residual carries a steady line at {found['frequency_hz']:.2f} Hz, "
+                f"{found['amplitude']:.3g} {found['unit']} amplitude ({found['noise_sd']:.2f} x its noise sd) in "
+                f"{found['recordings']} recordings, {found['significance']:.0f} x over the spectrum beside it, that the "
+                "simulation does not carry: a disturbance no catalogue effect makes (mains hum, a fan or a pump, a "
+                "limit cycle the model lacks)")
+    return (f"{found['channel']}'s residual drifts steadily in time at {found['rate']:.3g} {found['unit']}/s "
+            f"({found['noise_sd_per_s']:.2f} x its noise sd per s) in {found['recordings']} recordings, through motion "
+            f"and rest alike, {found['significance']:.0f} x what chance takes: a drift of the sensor or its amplifier "
+            "(thermal) or a slow physics the model lacks, which no catalogue effect makes (an offset only halves it)")

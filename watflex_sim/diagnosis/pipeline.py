@@ -17,7 +17,7 @@ noise of the chosen one and, when there are any, the experiment that would tell 
 the refit nominal model is within NOISE_MARGIN x the noise on training AND validation data and no window stands
 far above what noise and discretisation leave there (locate.local_excess: such windows get a round of their own),
 `explained` when the findings bring both there, `unexplained` otherwise, and where a channel's residual is a static
-curve of its own value or carries a steady line the simulation does not (disturbance.steady_lines).
+curve of its own value or carries a steady line or drift no catalogue effect makes (disturbance.disturbances).
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ import numpy as np
 
 from ..recording import Recording
 from .data import Data, Model, prepare, residual_vector, unit_change
-from .disturbance import steady_lines
+from .disturbance import disturbances
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import canonical_form, finding
 from .fitting import value_of
@@ -275,8 +275,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
                   "ablated": ablated[i]["noise_ratio"], "held_without": ablated[i]["nrmse"]}
         findings.append(finding(data, effect, ranges.get(i, {}), scores, mismatch))
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
-    curved, lines = curved_channels(data, sims), steady_lines(data, sims)
-    verdict = verdict_of(current, train_f, held_f, share, curved, local, lines)
+    curved, disturbed = curved_channels(data, sims), disturbances(data, sims)
+    verdict = verdict_of(current, train_f, held_f, share, curved, local, disturbed)
     alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
     report = {
         "format": "flexarm-diagnosis/1",
@@ -284,7 +284,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "recordings": data.names,
         "verdict": verdict,
         "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local, limited,
-                                         lines),
+                                         disturbed),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,
@@ -309,7 +309,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     if verdict == "unexplained":
         report["residual"] = {"where": locate(data, sims), "training_noise_ratio": train_f["noise_ratio"],
                               "validation_noise_ratio": held_f["noise_ratio"], "candidates_tried": fitted_report,
-                              "curved_channels": curved, "steady_lines": lines, "local_windows": local,
+                              "curved_channels": curved, "disturbances": disturbed, "local_windows": local,
                               "parameters_at_bounds": report["parameters_at_bounds"]}
     if propose and alternatives:
         from .experiment import propose_experiment

@@ -13,7 +13,7 @@ only when a model without findings is within NOISE_MARGIN x the noise on trainin
 is far above its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
 excess, unless the whole is within the noise and one channel stays far above it: `lone_channel`), `unexplained`
 otherwise, and whenever a channel's residual is a static curve of its own value (`curved_channels`: a nonlinear
-characteristic the catalogue does not have) or carries a steady line the simulation does not (disturbance.steady_lines);
+characteristic the catalogue does not have) or a steady line or drift (disturbance.disturbances);
 `verdict_reason` says why in words.
 """
 from __future__ import annotations
@@ -253,12 +253,12 @@ def effective_samples(e: np.ndarray, drop: float = 0.05) -> float:
 
 
 def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict], local: list[dict] = (),
-               lines: list[dict] = ()) -> str:
+               disturbed: list[dict] = ()) -> str:
     """The verdict for a final `model` whose fit_scores are `train` and `held` (validation), its findings
     removing `share` of validation's excess over the noise (explained_share), `curved` its curved_channels,
-    `local` the windows far above their local null that asked for a round (locate.local_excess), `lines` the
-    channels whose residual carries a steady line the simulation does not have (disturbance.steady_lines)."""
-    if curved or lines:
+    `local` the windows far above their local null that asked for a round (locate.local_excess), `disturbed` the
+    channels whose residual carries a steady line or drift no catalogue effect makes (disturbance.disturbances)."""
+    if curved or disturbed:
         return "unexplained"
     if not model.effects:
         return "nothing_missing" if within_noise(train, held) and not local else "unexplained"
@@ -278,7 +278,7 @@ def lone_channel(train: dict, held: dict) -> tuple[str, float] | None:
 
 
 def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict], local: list[dict] = (), limit: int | None = None, lines: list[dict] = ()) -> str:
+                   curved: list[dict], local: list[dict] = (), limit: int | None = None, disturbed: list[dict] = ()) -> str:
     """Why the verdict, in words; `limit`: the number of findings at which the search stopped without asking whether
     a further effect would earn its place (max_effects), None where it asked."""
     stopped = (f"the search stopped at its limit of {limit} finding{'s' if limit != 1 else ''} (--max-effects) before "
@@ -294,12 +294,10 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
                           "sensor or amplifier characteristic the catalogue "
                           "does not have" for c in curved)
                 + f" ({now})")
-    if lines:
-        return ("; ".join(f"{x['channel']}'s residual carries a steady line at {x['frequency_hz']:.2f} Hz, "
-                          f"{x['amplitude']:.3g} {x['unit']} amplitude ({x['noise_sd']:.2f} x its noise sd) in "
-                          f"{x['recordings']} recordings, {x['significance']:.0f} x what chance takes, that the "
-                          "simulation does not carry: a disturbance no catalogue effect makes (mains hum, a fan or "
-                          "a pump, a limit cycle the model lacks)" for x in lines) + f" ({now})")
+    if disturbed:
+        from .disturbance import describe  # disturbance measures with effective_samples, from here
+
+        return "; ".join(describe(x) for x in disturbed) + f" ({now})"
     if verdict == "unexplained" and local and within_noise(train, held):
         return (f"within {NOISE_MARGIN:g} x the noise on the whole, but {len(local)} windows of {LOCAL_WINDOW_S:g} s stand "
                 f"more than {LOCAL_MARGIN:g} x above what noise and discretisation leave there: "
