@@ -297,7 +297,7 @@ def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, ref
     if disturbed:
         from .disturbance import describe  # disturbance measures with effective_samples, from here
 
-        return "; ".join(describe(x) for x in disturbed) + f" ({now})"
+        return "; ".join(describe(x) for x in disturbed) + ("" if limit is None else f"; {stopped}") + f" ({now})"
     if verdict == "unexplained" and local and within_noise(train, held):
         return (f"within {NOISE_MARGIN:g} x the noise on the whole, but {len(local)} windows of {LOCAL_WINDOW_S:g} s stand "
                 f"more than {LOCAL_MARGIN:g} x above what noise and discretisation leave there: "
