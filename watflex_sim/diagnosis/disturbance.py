@@ -59,18 +59,18 @@ def _periodogram(t: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(x.size, float(np.median(np.diff(t)))), np.abs(np.fft.rfft(x * np.hanning(x.size))) ** 2
 
 
-def _peaks(t: np.ndarray, r: np.ndarray, low: float, high: float, count: int = 1,
+def _peaks(freq: np.ndarray, power: np.ndarray, low: float, high: float, count: int = 1,
            beside: np.ndarray | None = None) -> list[float]:
-    """The frequencies (Hz) of `count` peaks of the periodogram of `r` in [low, high], at least three bins apart: the
-    highest, or with `beside` (a signal on the same samples) those highest over what `beside` has in the same bin
-    plus the band's median (a line in `r` that `beside` does not carry), first first."""
-    freq, power = _periodogram(t, r)
+    """The frequencies (Hz) of `count` peaks of a periodogram (_periodogram's `freq`, `power`) in [low, high], at
+    least three bins apart: the highest, or with `beside` (another signal's power in the same bins) those highest over
+    what `beside` has in the same bin plus the band's median (a line that the other signal does not carry), first
+    first."""
     band = np.flatnonzero((freq >= low) & (freq <= high))
     if band.size == 0:
         return []
     tops, _ = find_peaks(np.concatenate([[-np.inf], power[band], [-np.inf]]), distance=3)
     tops = band[tops - 1]
-    rank = power[tops] if beside is None else power[tops] / (_periodogram(t, beside)[1][tops] + np.median(power[band]))
+    rank = power[tops] if beside is None else power[tops] / (beside[tops] + np.median(power[band]))
     return [float(f) for f in freq[tops[np.argsort(rank)[::-1][:count]]]]
 
 
@@ -84,8 +84,9 @@ def line_in(t: np.ndarray, residual: np.ndarray, simulated: np.ndarray) -> dict 
     if t.size < 200 or span <= 0.0:
         return None
     freq, power = _periodogram(t, residual)
+    own_power = _periodogram(t, simulated)[1]
     rows = []
-    for f0 in _peaks(t, residual, LINE_CYCLES / span, 0.45 / float(np.median(np.diff(t))), LINE_PEAKS, simulated):
+    for f0 in _peaks(freq, power, LINE_CYCLES / span, 0.45 / float(np.median(np.diff(t))), LINE_PEAKS, own_power):
         grid = f0 + np.linspace(-1.0, 1.0, 21) / span  # the bin's width, refined
         f = float(grid[int(np.argmax([_sinusoid(t, residual, g)[0] for g in grid]))])
         gain, _, amplitude = _sinusoid(t, residual, f)
@@ -94,7 +95,7 @@ def line_in(t: np.ndarray, residual: np.ndarray, simulated: np.ndarray) -> dict 
         beside = np.r_[power[max(1, k - width):max(1, k - 3)], power[k + 4:k + width + 1]]
         pieces = int(np.clip(span * f // LINE_WINDOW_CYCLES, 4, 16))
         windows = [_sinusoid(t[w], residual[w], f)[2] for w in np.array_split(np.arange(t.size), pieces)]
-        near = _peaks(t, simulated, 0.8 * f, 1.2 * f)
+        near = _peaks(freq, own_power, 0.8 * f, 1.2 * f)
         own = _sinusoid(t, simulated, near[0])[2] if near else 0.0
         row = {"frequency": f, "gain": gain, "amplitude": amplitude,
                "significance": float(power[k] / np.median(beside)) if beside.size and np.median(beside) > 0 else np.inf,
@@ -105,6 +106,17 @@ def line_in(t: np.ndarray, residual: np.ndarray, simulated: np.ndarray) -> dict 
             return row
         rows.append(row)
     return rows[0] if rows else None
+
+
+def _residuals(data: Data, sims: list):
+    """Per recording and compared channel with a noise and 200 finite samples or more: (channel, time in s, residual
+    measured - simulated in noise units, simulated in noise units, the noise in the channel's unit)."""
+    for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
+        for c in chans:
+            ok = np.isfinite(rec.channels[c]) & np.isfinite(sim.channels[c])
+            if noise[c] > 0.0 and ok.sum() >= 200:
+                yield (c, rec.time[ok], (rec.channels[c] - sim.channels[c])[ok] / noise[c], sim.channels[c][ok] / noise[c],
+                       noise[c])
 
 
 def is_line(row: dict) -> bool:
@@ -121,15 +133,10 @@ def steady_lines(data: Data, sims: list) -> list[dict]:
     period, in that recording only (EMPS' pulses run, pulses every 0.5 s: a 113 Hz line in the drive command, steady
     and in one phase, in 1 of its 2 recordings); a disturbance from outside is there whatever the experiment."""
     rows: dict[str, list[tuple[dict, float, float]]] = {}  # channel -> (line, its noise, the recording's span)
-    for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
-        for c in chans:
-            ok = np.isfinite(rec.channels[c]) & np.isfinite(sim.channels[c])
-            if noise[c] <= 0.0 or ok.sum() < 200:
-                continue
-            t = rec.time[ok]
-            row = line_in(t, (rec.channels[c] - sim.channels[c])[ok] / noise[c], sim.channels[c][ok] / noise[c])
-            if row is not None:
-                rows.setdefault(c, []).append((row, noise[c], float(t[-1] - t[0])))
+    for c, t, residual, simulated, noise in _residuals(data, sims):
+        row = line_in(t, residual, simulated)
+        if row is not None:
+            rows.setdefault(c, []).append((row, noise, float(t[-1] - t[0])))
     units = data.rig.units()
     out = []
     for c, found in rows.items():
@@ -173,11 +180,8 @@ def steady_drifts(data: Data, sims: list) -> list[dict]:
     """Channels with a steady drift (is_drift) in more than half their recordings: channel, rate (the channel's unit
     per s and noise sd per s, the median over those recordings), significance, recordings."""
     rows: dict[str, list[tuple[dict, float]]] = {}  # channel -> (trend, its noise)
-    for rec, sim, chans, noise in zip(data.recordings, sims, data.channels, data.noise):
-        for c in chans:
-            ok = np.isfinite(rec.channels[c]) & np.isfinite(sim.channels[c])
-            if noise[c] > 0.0 and ok.sum() >= 200:
-                rows.setdefault(c, []).append((drift_in(rec.time[ok], (rec.channels[c] - sim.channels[c])[ok] / noise[c]), noise[c]))
+    for c, t, residual, _, noise in _residuals(data, sims):
+        rows.setdefault(c, []).append((drift_in(t, residual), noise))
     units = data.rig.units()
     out = []
     for c, found in rows.items():
