@@ -23,6 +23,9 @@ from .tolerance import fold_within_tolerance
 from .uncertainty import final_intervals
 from .validate import eliminate, vague_findings
 
+NO_EFFECT = "no effect at all (on a rig parameter's knob: a value within its tolerance)"  # what a vague finding's
+# intervals include (validate.vague_findings)
+
 
 def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local: list[dict], raised: bool,
            nominal_floors: dict, refit: tuple, round_models: dict, steps: list[dict], rejected: list[dict]) -> tuple:
@@ -60,11 +63,11 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
         if not vague:
             break
         say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
-                                                   for i in vague) + ": its 95 % intervals include no effect at all")
+                                                   for i in vague) + f": its 95 % intervals include {NO_EFFECT}")
         rejected.extend({"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
                          "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
                          "intervals": ranges.get(i, {}),
-                         "why": "its 95 % intervals include no effect at all and validation without it is not far worse"}
+                         "why": f"its 95 % intervals include {NO_EFFECT} and validation without it is not far worse"}
                         for i in vague)
         found = len(trained.effects)
         current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))

@@ -3,7 +3,8 @@
 Contract: `at_bounds` lists the refit ratios at their tolerance bound; `beyond_tolerance` turns those whose
 knob a catalogue effect turns into candidates (a datasheet wrong beyond its tolerance is a finding, not a
 silent clamp); `fold_within_tolerance` folds such an effect that stays within tolerance back into the rig's
-parameters; `knob_partner` names the rig parameter an effect shares its knob with.
+parameters; `knob_partner` names the rig parameter an effect shares its knob with; `reaches_tolerance` whether such an effect's
+interval reaches back within that parameter's tolerance.
 """
 from __future__ import annotations
 
@@ -20,6 +21,20 @@ def knob_partner(data: Data, effect: dict) -> str | None:
     the residual depends on their product only), or None."""
     knob = KNOB_OF.get(effect["effect"])
     return next((n for n, p in data.rig.parameters.items() if (p["knob"], p["target"]) == (knob, effect["where"])), None)
+
+
+def reaches_tolerance(data: Data, effect: dict, intervals: dict[str, tuple[float, float]]) -> bool:
+    """Whether the 95 % interval of a knob-tied effect's ratio (about the fit's split and about the datasheet's,
+    uncertainty.nominal_split) reaches its rig parameter's tolerance band (1 +- tolerance): the data cannot tell a
+    change beyond the tolerance, which is a finding, from parameter error within it, which is not (rigs.md section 4).
+    The knob-tied counterpart of explain.indistinct, whose neutral ratio 1 such an interval always reaches by design.
+    False for an effect without a knob partner or without an interval."""
+    name = knob_partner(data, effect)
+    low, high = intervals.get("ratio") or (None, None)
+    if name is None or low is None:
+        return False
+    tolerance = data.rig.parameters[name]["tolerance"]
+    return low <= 1 + tolerance and high >= 1 - tolerance
 
 
 def at_bounds(data: Data, model: Model) -> list[dict]:
