@@ -3,8 +3,8 @@
 Contract: `at_bounds` lists the refit ratios at their tolerance bound; `beyond_tolerance` turns those whose
 knob a catalogue effect turns into candidates (a datasheet wrong beyond its tolerance is a finding, not a
 silent clamp); `fold_within_tolerance` folds such an effect that stays within tolerance back into the rig's
-parameters; `knob_partner` names the rig parameter an effect shares its knob with; `reaches_tolerance` whether such an effect's
-interval reaches back within that parameter's tolerance.
+parameters; `knob_partner` names the rig parameter an effect shares its knob with; `reaches_tolerance` says whether
+such an effect's interval reaches back within that parameter's tolerance.
 """
 from __future__ import annotations
 

@@ -345,9 +345,9 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
     the noise with the finding (a real rig: the Quanser 2DSFL at 612 x, its link 2 x0.343 [0.19, 4.0], 781 x
     without), the excess is the model's whole error and no one finding removes EXPLAINED_SHARE of it: validation
     without it must then be worse by what its parameters cost (far_gain's MIN_GAIN each). Never vague: a finding
-    that local windows need (eliminate's `local_needed`). `refit_without(i)`, where given, scores validation without finding i with the
-    rest and the rig's parameters refit on training (None where that diverges): a finding kept only by validation
-    without it as it stood is judged again by that, as a dropped one's rest is (seed 77's two-joint watflex-2ae75650: a
+    that local windows need (eliminate's `local_needed`). `refit_without(i)`, where given, scores validation without
+    finding i with the rest and the rig's parameters refit on training (None where that diverges): a finding kept only
+    by validation without it as it stood is judged again by that, as a dropped one's rest is (seed 77's two-joint watflex-2ae75650: a
     shoulder Coulomb friction of 0.03 N m [0, 0.14] beside the true strain offset; validation 0.68 x the noise with
     it, 1.15 x without and the shoulder encoder at 4.2 x, but 0.69 x with the shoulder's friction refit x1.0425 ->
     x1.0459 instead)."""
@@ -359,7 +359,9 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
         return excess_gain(without, held) >= EXPLAINED_SHARE
 
     def vague(i: int, effect: dict) -> bool:
-        unsure = (reaches_tolerance if knob_partner(data, effect) is not None else indistinct)(data, effect, ranges.get(i, {}))
+        intervals = ranges.get(i, {})
+        unsure = (reaches_tolerance(data, effect, intervals) if knob_partner(data, effect) is not None
+                  else indistinct(data, effect, intervals))
         if not unsure or ablated[i].get("local_needed"):
             return False
         if not needed(ablated[i], effect):
