@@ -347,10 +347,10 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
     without it must then be worse by what its parameters cost (far_gain's MIN_GAIN each). Never vague: a finding
     that local windows need (eliminate's `local_needed`). `refit_without(i)`, where given, scores validation without
     finding i with the rest and the rig's parameters refit on training (None where that diverges): a finding kept only
-    by validation without it as it stood is judged again by that, as a dropped one's rest is (seed 77's two-joint watflex-2ae75650: a
-    shoulder Coulomb friction of 0.03 N m [0, 0.14] beside the true strain offset; validation 0.68 x the noise with
-    it, 1.15 x without and the shoulder encoder at 4.2 x, but 0.69 x with the shoulder's friction refit x1.0425 ->
-    x1.0459 instead)."""
+    by validation without it as it stood is judged again by that, as a dropped one's rest is (seed 77's two-joint
+    watflex-2ae75650: a shoulder Coulomb friction of 0.03 N m [0, 0.14] beside the true strain offset; validation 0.68
+    x the noise with it, 1.15 x without and the shoulder encoder at 4.2 x, but 0.69 x with the shoulder's friction
+    refit x1.0425 -> x1.0459 instead)."""
     def needed(without: dict, effect: dict) -> bool:
         """Whether validation `without` the finding is far worse than with it (above)."""
         if held["noise_ratio"] >= FAR_FROM_NOISE:
