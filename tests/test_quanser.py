@@ -2,7 +2,7 @@
 
 Data: tests/data/quanser_2dsfl/ (Quanser's Results/data_{fsf,psf}_*.mat, from
 basta/quanser-2-dof-serial-flexible-link @ 48ab0ce, MIT; see LICENSE and SOURCE.md there).
-Reference figures: ABOUT.md of ../shared/realdata/quanser_2dsfl (the published gains reproduce
+Reference figures: the ABOUT.md of the team's realdata/quanser_2dsfl folder, not shipped (the published gains reproduce
 the fsf current command within 2-3 %; hub 2 stops 0.8-1.2 deg short of its +-10 deg target).
 """
 import math
