@@ -116,6 +116,11 @@ def effect_slots_of(data: Data, model: Model) -> list[Slot]:
     return slots
 
 
+def parameter_count(data: Data, effect: dict) -> int:
+    """The fitted parameters of one effect."""
+    return len(effect_slots_of(data, Model([effect])))
+
+
 def fd_step(slot: Slot, u: float) -> float:
     """Finite-difference step in internal units: large enough to see through stick-slip."""
     h = 0.1 if slot.log else 0.05 * slot.span()

@@ -13,7 +13,7 @@ from ..effects import CATALOGUE
 from .data import Data, Model, unit_change
 from .effect_fit import scored
 from .explain import units_at
-from .fitting import Slot, effect_slots_of, levenberg, rig_slots, unpack, value_of
+from .fitting import Slot, effect_slots_of, levenberg, parameter_count, rig_slots, unpack, value_of
 from .motion import scale_of
 from .period import neutral_others, period_profile, periodic_name, profile_ladder
 from .runner import Runner, evaluator, in_units, run_gathered
@@ -304,8 +304,3 @@ def refit_in_place(data: Data, runner: Runner, trial: Model, baseline: tuple[dic
     last = trial.effects[-1]
     return gains(scored(data, {"effect": last["effect"], "where": last["where"], "model": model, "cost": cost,
                                "free": free, "J": J, "n_params": parameter_count(data, last)}, sims), *baseline)
-
-
-def parameter_count(data: Data, effect: dict) -> int:
-    """The fitted parameters of one effect."""
-    return len(effect_slots_of(data, Model([effect])))

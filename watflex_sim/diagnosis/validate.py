@@ -25,7 +25,7 @@ import numpy as np
 from ..recording import Recording
 from .data import DISCRETISATION_COUNT, Data, Model
 from .explain import indistinct
-from .fitting import effect_slots_of
+from .fitting import parameter_count
 from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
 from .motion import peak
 from .runner import Runner
@@ -354,7 +354,7 @@ def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: l
     def needed(without: dict, effect: dict) -> bool:
         """Whether validation `without` the finding is far worse than with it (above)."""
         if held["noise_ratio"] >= FAR_FROM_NOISE:
-            cost = MIN_GAIN * len(effect_slots_of(data, Model([effect])))
+            cost = MIN_GAIN * parameter_count(data, effect)
             return (without["noise_ratio"] - held["noise_ratio"]) / without["noise_ratio"] >= cost
         return excess_gain(without, held) >= EXPLAINED_SHARE
 
