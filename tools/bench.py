@@ -333,6 +333,8 @@ def bench_segments(args) -> str:
     settle = getattr(engine, "_settle_bearings", None)
     for rig, build in BUILDERS.items():
         base = RIGS[rig]
+        if "n_segments" not in {f.name for f in dataclasses.fields(base)}:
+            continue  # a rigid rig (EMPS): nothing to discretise
         for n in args.segments:
             params = dataclasses.replace(base, n_segments=n)
             t0 = time.perf_counter()
