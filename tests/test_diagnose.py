@@ -297,6 +297,26 @@ def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     assert far.estimate["m"] == pytest.approx(1.6, abs=3 * ALONG_TOLERANCE * 0.2)  # tolerance of the bound
 
 
+def test_rescreen_looks_beyond_an_estimate_that_loses():
+    """rescreen(): a residual that is not monotone along the candidate's line, as stick-slip's (a laser hub Coulomb
+    friction of 0.6 / 0.3 N m estimated at 0.27 / 0.033 gains 0.24 half-way, -0.28 there, 0.33 at twice it:
+    rescreen.looks_further). r(m) = r0 f(m), f piecewise linear through (0, 1), (0.05, 0.9), (0.1, 1.2), (0.2, 0.3),
+    (0.4, 1.5); from 0.1 the gains 1 - f^2 are -0.44 there and 0.19 half-way: on to 0.2 (0.91), not to 0.4 (-1.25), and
+    searched between 0.1 and 0.4 (search_along) the estimate is the vertex at 0.2, to ALONG_TOLERANCE x 0.1 (Brent).
+    Before looks_further the estimate stayed at 0.1, where it loses."""
+    from watflex_sim.diagnosis import Candidate, Model, Slot
+    from watflex_sim.diagnosis.rescreen import ALONG_TOLERANCE, rescreen
+
+    r0 = np.ones(10)
+    f = lambda m: np.interp(m, [0.0, 0.05, 0.1, 0.2, 0.4], [1.0, 0.9, 1.2, 0.3, 1.5])  # noqa: E731
+    cand = Candidate("stick", "x", {"m": 0.2}, {"m": Slot(("effect", -1, "m"), -10.0, 10.0)}, {"m": 0.0},
+                     estimate={"m": 0.1}, gain=0.5)
+    rescreen(lambda models: [r0 * f(m.effects[-1]["m"]) for m in models], [cand], Model(), np.zeros((10, 0)), [],
+             np.zeros(0), r0)
+    assert cand.estimate["m"] == pytest.approx(0.2, abs=2 * ALONG_TOLERANCE * 0.1)
+    assert cand.checked == pytest.approx(1 - 0.3**2, abs=0.02)
+
+
 def test_rescreen_finds_a_basin_between_two_moves():
     """rescreen(): r(m) = r0 (0.2 + 0.8 min(1, |m - 0.27| / 0.25)), a basin at 0.27 with a plateau beyond 0.52 (a
     link's stiffness: seed 70's watflex-0eef1dc1, estimated at x1.99, moved on to x3.95 on the plateau past the basin
