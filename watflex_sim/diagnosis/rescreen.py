@@ -4,7 +4,8 @@ Contract: `rescreen(evaluate, cands, base, columns, slots, at, r0)` sets each ca
 training cost a simulation at its estimate, or half-way to it, leaves once the rig's parameters and the findings so
 far are refit to first order) and moves its `estimate` where a simulation gains more: on along its line while that
 gains or where the estimate loses (`looks_further`, `further`, then `search_along` between the moves), a link's
-stiffness on a ladder of rungs (`ladder`), a log-scaled switch half a level either side (`between_levels`). screening.shortlist then reads `checked`.
+stiffness on a ladder of rungs (`ladder`), a log-scaled switch half a level either side (`between_levels`).
+screening.shortlist then reads `checked`.
 """
 from __future__ import annotations
 
@@ -101,11 +102,11 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
 def looks_further(gains: list[float]) -> bool:
     """Whether a candidate simulated at its estimate and half-way to it (`gains`, in that order) is moved on along
     its line: the gain rises from half-way to the estimate, or the estimate itself loses (gain <= 0, not diverged).
-    Stick-slip is far from linear in a friction's size and its residual is not monotone along
-    the line: a laser hub Coulomb friction of 0.6 / 0.3 N m (tools/bench_diagnose.py) estimated at 0.27 / 0.033 gains
-    0.24 half-way, -0.28 there and 0.33 at twice that; fitted from the estimate it ended at 0.115 / 0 N m with the
-    rig's parameters at their bounds (14 x the noise, a spurious fine ripple chosen instead), from twice it at the
-    truth (0.5997 / 0.2998)."""
+    Stick-slip is far from linear in a friction's size and its residual is not monotone along the line: a laser hub
+    Coulomb friction of 0.6 / 0.3 N m (tools/bench_diagnose.py) estimated at 0.27 / 0.033 gains 0.24 half-way, -0.28
+    there and 0.33 at twice that; fitted from the estimate it ended at 0.115 / 0 N m with the rig's parameters at
+    their bounds (14 x the noise, a spurious fine ripple chosen instead), from twice it at the truth (0.5997 /
+    0.2998)."""
     if len(gains) != 2:
         return False
     at, half = gains
