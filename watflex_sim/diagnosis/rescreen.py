@@ -70,23 +70,23 @@ def rescreen(evaluate, cands: list[Candidate], base: Model, columns: np.ndarray,
     # on along the line while the gain still rises from half-way to the estimate: a linear signature taken
     # near neutral under-reaches an effect far from it (a beam 0.26 x as stiff, estimated at 0.43 x); and where the
     # estimate itself loses, beyond it too (`looks_further`)
-    rising = [c for c in todo if looks_further(gains[id(c)])]
-    starts = {id(c): (c, dict(c.estimate)) for c in rising}  # where each rising one was, and the moves it made on
+    moving = [c for c in todo if looks_further(gains[id(c)])]
+    starts = {id(c): (c, dict(c.estimate)) for c in moving}  # where each started, and the moves it made on
     made: dict[int, int] = {}
     for _ in range(FURTHER_STEPS):
-        moves = {id(c): further(c) for c in rising}
-        rising = [c for c in rising if moves[id(c)] != c.estimate]
-        if not rising:
+        moves = {id(c): further(c) for c in moving}
+        moving = [c for c in moving if moves[id(c)] != c.estimate]
+        if not moving:
             break
-        runs = evaluate([c.model(base, moves[id(c)]) for c in rising])
+        runs = evaluate([c.model(base, moves[id(c)]) for c in moving])
         better = []
-        for cand, r in zip(rising, runs):
+        for cand, r in zip(moving, runs):
             gain = gain_of(r)
             if gain > cand.checked:
                 cand.checked, cand.estimate = gain, moves[id(cand)]
                 made[id(cand)] = made.get(id(cand), 0) + 1
                 better.append(cand)
-        rising = better
+        moving = better
     for key, k in made.items():  # between the moves: the line's best lies anywhere from half to twice the last
         cand, first = starts[key]
         search_along(evaluate, cand, base, first, 2.0 ** k, gain_of)
