@@ -254,6 +254,31 @@ def test_blind_laser_diagnosis_names_coulomb_friction_whatever_the_file_order(tm
     assert reverse["findings"][0]["parameters"] == first["parameters"]
 
 
+def test_a_dwell_time_stiction_is_screened_at_several_time_constants():
+    """make_candidate / probes(): a shape parameter with variants (effects.Param.variants: the dwell's time constant,
+    no neutral value, at 0.2 and 5 x its 2 s start) has the effect's neutral parameter probed at each value too;
+    screen(): the variant whose signature the residual carries gives the gain and the estimate, its time constant with
+    it. A break-away raised by 1 + g (1 - exp(-t_rest / tau)) after rests of 0.02-1 s, g = 0.53 and tau = 0.4 s (seed
+    92's two-joint watflex-b0e0a4b0: g 0.532, tau 0.411 s, screened at 0 % with the start's 2 s, at 88 % with 0.4 s,
+    and found at 0.522 / 0.408 s): estimated at 0.4 s and g within 2 %, where the start's column explains less."""
+    from watflex_sim.diagnosis import screen
+    from watflex_sim.diagnosis.screening import make_candidate
+
+    cand = make_candidate(None, "dwell_time_stiction", "elbow")  # its parameters take no size from the data
+    assert cand.variants == pytest.approx((0.4, 10.0))
+    assert cand.probes()[(("shape", 0.4), "gain")] == {"gain": 0.5, "time_constant": 0.4}
+    rest = np.linspace(0.02, 1.0, 300)  # s, the rests before each break-away
+    column = lambda tau: -(1.0 - np.exp(-rest / tau))  # noqa: E731 - the residual's change per unit of gain
+    cand.signature = {1.0: {"gain": column(2.0)}} | {("shape", tau): {"gain": column(tau)} for tau in cand.variants}
+    r0 = 0.53 * (1.0 - np.exp(-rest / 0.4)) + 0.002 * np.random.default_rng(3).normal(size=rest.size)
+    start_only = make_candidate(None, "dwell_time_stiction", "elbow")
+    start_only.signature = {1.0: cand.signature[1.0]}
+    screen([cand, start_only], np.zeros((rest.size, 0)), [], np.zeros(0), r0)
+    assert cand.estimate["time_constant"] == 0.4
+    assert cand.estimate["gain"] == pytest.approx(0.53, rel=0.02)
+    assert cand.gain > 0.99 and start_only.gain < cand.gain - 0.01
+
+
 def test_shortlist_fits_screening_ties_too():
     """shortlist(): the top two by screening gain, plus any within 5 % of the second (a tie in
     the screening is no evidence), never more than four, never one that explains nothing."""

@@ -62,6 +62,8 @@ class Param:
     quantum: float = 0.0  # it acts in whole steps of this (a delay in control periods): fitted by trying steps
     periodic: bool = False  # the period of `amplitude` sin(2 pi x / period + `phase`) in the same effect: fitted from a
     # scan of periods (the residual is far from convex in it)
+    variants: tuple[float, ...] = ()  # a shape parameter (no neutral) the screening also probes the effect's neutral
+    # parameters at, as these multiples of its start: the signature changes with it beyond what a linear picture follows
 
 
 # --- knobs: what a refit parameter or an effect turns, by MuJoCo element name --------------
@@ -336,7 +338,9 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "stribeck_friction": (stribeck_friction, (P("breakaway_positive", "N m", 0.0, 1.0, 0.05, "effort", 0.0), P("breakaway_negative", "N m", 0.0, 1.0, 0.05, "effort", 0.0), P("v_s", "rad/s", 1e-3, 1.0, 0.03, log=True)), "joint"),
     "viscous_friction": (viscous_friction, (P("coefficient", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0), P("coefficient_negative", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0)), "joint"),
     "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4, log=True), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0, log=True)), "joint"),
-    "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True)), "joint"),
+    "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0),
+                                                  P("time_constant", "s", 0.05, 30.0, 2.0, log=True, variants=(0.2, 5.0))),
+                            "joint"),
     "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.2, 200.0, 3.0, "motion", log=True, periodic=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
     "backlash": (backlash, (P("width", "rad", 1e-5, 0.5, 0.15, "motion", log=True), P("position", "-", -1.0, 1.0, 0.0)), "joint"),
     "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),

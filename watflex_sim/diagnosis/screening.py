@@ -78,6 +78,8 @@ class Candidate:
     checked: float | None = None  # rescreen: the gain simulated at (and half-way to) the estimate
     periodic: str = ""  # a ripple's periodic parameter (effects.Param.periodic), with the values screened in quadrature
     periods: tuple[float, ...] = ()  # (RIPPLE_CYCLES), besides its start
+    shape: str = ""  # a shape parameter with `variants` (effects.Param): the neutral ones are probed at each value too
+    variants: tuple[float, ...] = ()  # its values (physical units) besides its start
     ladder: str = ""  # a `wide` log-scaled parameter with a neutral (a link's stiffness): rescreen's `ladder`
 
     def model(self, base: Model, values: dict[str, float]) -> Model:
@@ -99,12 +101,17 @@ class Candidate:
             for name, phase in (("amplitude", 0.0), (QUADRATURE, math.pi / 2)):
                 probes[(("period", period), name)] = {**at_zero, "amplitude": self.probe("amplitude"), "phase": phase,
                                                       self.periodic: period}
+        for value in self.variants:  # keyed ("shape", its value), likewise
+            probes.update({(("shape", value), name): {**at_zero, self.shape: value, name: self.probe(name)}
+                           for name in self.neutral})
         return probes
 
     def probe_step(self, level, name: str) -> float:
         """How far from neutral the probe (level, name) moves its parameter: the column's divisor."""
         if name == "switch":
             return 1.0
+        if isinstance(level, tuple) and level[0] == "shape":  # a shape variant: each neutral parameter at its start
+            return self.probe(name) - self.neutral[name]
         if isinstance(level, tuple):  # a ripple's period variant: its amplitude at its start, either quadrature
             return self.probe("amplitude") - self.neutral["amplitude"]
         return self.probe(name, level) - self.neutral[name]
@@ -143,8 +150,11 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
     if ripple:  # its slot is in motion ranges
         motion = scale_of(data, ripple, where)
         periods = tuple(motion / n for n in RIPPLE_CYCLES if slots[periodic].low <= motion / n <= slots[periodic].high)
+    shaped = next((p for p in params if p.variants), None)  # a shape the signature depends on beyond a linear picture
+    shape = shaped.name if shaped else ""
+    variants = tuple(float(np.clip(start[shape] * f, slots[shape].low, slots[shape].high)) for f in shaped.variants) if shaped else ()
     return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta, periodic=periodic, periods=periods,
-                     ladder=ladder)
+                     ladder=ladder, shape=shape, variants=variants)
 
 
 def excited(data: Data, effect: str, where: str) -> bool:
@@ -293,11 +303,13 @@ def screen(cands: list[Candidate], columns: np.ndarray, slots: list[Slot], at: n
             if QUADRATURE in coefficients:  # a ripple at one period: a sin + b cos is an amplitude and a phase
                 a, b = coefficients.pop("amplitude"), coefficients.pop(QUADRATURE)
                 cand.estimate.update({cand.periodic: level[1], **cand.ripple(a, b)})
+            if isinstance(level, tuple) and level[0] == "shape":
+                cand.estimate[cand.shape] = level[1]
             for n, a in coefficients.items():
                 if n != "switch":
                     slot = cand.slots[n]
                     if slot.log:  # a ratio acts nonlinearly: its signature is linear near its probe only
-                        reach = EXTRAPOLATE * abs(cand.probe(n, level) - cand.neutral[n])
+                        reach = EXTRAPOLATE * abs(cand.probe_step(level, n))
                         a = float(np.clip(a, -reach, reach))
                     value = float(np.clip(cand.neutral[n] + a, slot.low, slot.high))
                     cand.estimate[n] = value if value > 0 or not slot.log else cand.start[n]
