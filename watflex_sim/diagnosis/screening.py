@@ -150,9 +150,11 @@ def make_candidate(data: Data, effect: str, where: str) -> Candidate:
     if ripple:  # its slot is in motion ranges
         motion = scale_of(data, ripple, where)
         periods = tuple(motion / n for n in RIPPLE_CYCLES if slots[periodic].low <= motion / n <= slots[periodic].high)
-    shaped = next((p for p in params if p.variants), None)  # a shape the signature depends on beyond a linear picture
-    shape = shaped.name if shaped else ""
-    variants = tuple(float(np.clip(start[shape] * f, slots[shape].low, slots[shape].high)) for f in shaped.variants) if shaped else ()
+    shaped = next((p for p in params if p.variants), None)
+    shape, variants = "", ()
+    if shaped:  # a shape the signature depends on beyond a linear picture: its variants within its slot
+        shape = shaped.name
+        variants = tuple(float(np.clip(start[shape] * f, slots[shape].low, slots[shape].high)) for f in shaped.variants)
     return Candidate(effect, where, start, slots, neutral, levels, quanta=quanta, periodic=periodic, periods=periods,
                      ladder=ladder, shape=shape, variants=variants)
 
