@@ -1456,11 +1456,51 @@ def test_every_period_rung_is_carried_one_step_before_the_best_are_chosen():
     ways = [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)), start)]
     (found, found_cost), = scan.period_scans(evaluate, cand, Model(), start, ways)
     rungs = scan.scan_rungs
-    with patch.object(scan, "scan_rungs", lambda *a, **k: rungs(*a, **{**k, "every": False})):
+    with patch.object(scan, "scan_rungs", lambda *a, **k: rungs(*a, **{**k, "every": False, "ring": ()})):
         (three, three_cost), = scan.period_scans(evaluate, cand, Model(), start, ways)
     assert abs(three["period"] / truth["period"] - 1) > 0.5 and three_cost > 10.0
     assert abs(found["period"] / truth["period"] - 1) < 0.02 and found_cost < 0.5
     assert found_cost <= three_cost
+
+
+def test_a_ripple_longer_than_the_motion_is_scanned_at_a_ring_of_phases():
+    """period_scans(): at a rung of a cycle or less over the motion's range a ripple acts as a bias and a slope, and
+    where the joint sticks the residual is far from linear in its a sin + b cos: the probes' linear estimate, carried
+    on, is no guide (seed 93, watflex-3f8a52e2: an elbow ripple of 0.784 N m at 1.127 rad over 0.54 rad of motion, the
+    rung at 1.056 rad estimated at 1.47 N m with a spring of -0.78 N m/rad and left at 8.4e6; scanned at 0.359 rad,
+    3.8e6, fitted there, 12 x the noise left; the truth costs 1.7e5). Such rungs are also simulated at RING_PHASES
+    phases at RING_SIZES of the start's amplitude, the least costly point a contender: there the scan lands at 1.056 rad,
+    0.816 N m, -0.72 rad (3.8e5), and the fit at 0.7837 N m, 1.129 rad, -0.943 rad, `explained`. Stand-in: a response
+    that grows as the cube of the ripple's torque (the further beyond what holds the joint, the more it moves), the
+    truth 0.78 N m at 1.127 rad (phase -0.94) along 0.544 rad, probed at 1.375 N m as the screening starts it. Without
+    the ring the scan lands at another period (0.762 rad); with it at the ladder's rung nearest the truth (1.066 rad:
+    the rungs are 1.4 x apart there), the amplitude within 15 % and the phase within 0.15 rad, and costs less."""
+    from watflex_sim.diagnosis import scan
+    from watflex_sim.diagnosis.screening import Candidate
+
+    motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
+
+    def torque(e):
+        return e["amplitude"] * np.sin(2 * np.pi * x / e["period"] + e["phase"]) + e["spring"] * x
+
+    truth = {"amplitude": 0.78, "period": 1.127, "phase": -0.94, "spring": 0.0}
+
+    def evaluate(models):
+        return [torque(m.effects[-1]) ** 3 - torque(truth) ** 3 for m in models]
+
+    cand = Candidate("position_dependent_friction", "elbow", {"amplitude": 1.375, "period": 3 * motion, "phase": 0.0, "spring": 0.0},
+                     _ripple_slots(motion), {"amplitude": 0.0, "spring": 0.0})
+    cost = lambda r: float(r @ r)  # noqa: E731
+    none = np.zeros((x.size, 0))
+    ways = [(cost, (none, np.zeros(0), np.zeros(0), np.zeros(0)), dict(cand.start))]
+    (found, found_cost), = scan.period_scans(evaluate, cand, Model(), dict(cand.start), ways)
+    rungs = scan.scan_rungs
+    with patch.object(scan, "scan_rungs", lambda *a, **k: rungs(*a, **{**k, "ring": ()})):
+        (linear, linear_cost), = scan.period_scans(evaluate, cand, Model(), dict(cand.start), ways)
+    assert abs(linear["period"] / truth["period"] - 1) > 0.25
+    assert abs(math.log(found["period"] / truth["period"])) < 0.5 * math.log(scan.PERIOD_LADDER)
+    assert abs(found["amplitude"] / truth["amplitude"] - 1) < 0.15 and abs(found["phase"] - truth["phase"]) < 0.15
+    assert found_cost < linear_cost
 
 
 def test_a_ripples_period_is_scanned_beside_the_other_effects_the_shortlist_names():

@@ -32,6 +32,8 @@ LOCAL_STEP = 0.2  # a shape scan's Gauss-Newton steps take the size parameters' 
 # this share of their distance from neutral: the probe's secant from neutral is a poor slope where stick-slip makes the
 # residual bend (seed 59, a dwell's gain re-solved to ~0.5, its probe level, at every rung)
 SHAPE_LADDER = 2.0  # a shape parameter's scan (a time constant, a Stribeck velocity): the ratio of one rung to the next
+RING_PHASES = 8  # a period rung of a cycle or less over the motion's range is also simulated at this many phases ...
+RING_SIZES = (0.5, 1.0)  # ... at these shares of the start's amplitude (period_scans: its linear estimate fails there)
 
 
 def period_ladder(slot: Slot, motion: float) -> list[float]:
@@ -114,14 +116,19 @@ def period_scans(evaluate, cand: Candidate, base: Model, values: dict[str, float
     spring: its own column) the rest is `scan_rungs'`, done each of several ways on the same simulations: `ways` is a
     list of (cost, (columns, values, low, high), values given) - the cost of a residual with the columns re-solved, the
     columns re-solved beside the ripple's at each rung (the rig's, or the rig's and what else may be missing: `beside`)
-    and the values that way's result is judged against (`values`, or that way's earlier choice). Returns the best
-    (values, cost) of each way, in order; [] for an effect without a periodic parameter or whose neutral model
-    diverges."""
+    and the values that way's result is judged against (`values`, or that way's earlier choice). A rung of a cycle or
+    less over the motion's range is also simulated on a ring (RING_PHASES phases at RING_SIZES of the start's
+    amplitude), its least costly point a contender: there the ripple is a bias and a slope, which a joint that sticks
+    answers far from linearly, and the probes' estimate is no guide (seed 93, watflex-3f8a52e2: 0.78 N m at 1.127 rad
+    over 0.54 rad, the rung at 1.056 rad estimated at 1.47 N m beside a spring of -0.78 N m/rad, cost 8.4e6; the
+    ring's best there 1.4e6, carried on 3.8e5; 16 simulations a rung). Returns the best (values, cost) of each way, in
+    order; [] for an effect without a periodic parameter or whose neutral model diverges."""
     param = next((p for p in CATALOGUE[cand.effect][1] if p.periodic), None)
     if param is None:
         return []
     period, size, amp = param.name, cand.start["amplitude"], cand.slots["amplitude"]
-    periods = period_ladder(cand.slots[period], cand.slots[period].low / param.low)  # the slot is in motion ranges
+    motion = cand.slots[period].low / param.low  # the slot is in motion ranges
+    periods = period_ladder(cand.slots[period], motion)
 
     def rung(p: float) -> list[tuple[dict[str, float], float]]:
         return [({period: p, "amplitude": size, "phase": phase}, size) for phase in (0.0, math.pi / 2)]
@@ -130,7 +137,11 @@ def period_scans(evaluate, cand: Candidate, base: Model, values: dict[str, float
         return {period: p, **cand.ripple(*x)}
 
     fixed = [n for n in cand.neutral if n != "amplitude"]  # a spring beside the ripple: its own column
-    found = scan_rungs(evaluate, cand, base, values, ways, periods, rung, [amp, amp], np.zeros(2), as_own, fixed, every=True)
+    ring = [(p, np.r_[[cand.neutral[n] for n in fixed], s * size * math.cos(phase), s * size * math.sin(phase)])
+            for p in periods if p >= motion for s in RING_SIZES
+            for phase in np.linspace(-math.pi, math.pi, RING_PHASES, endpoint=False)]
+    found = scan_rungs(evaluate, cand, base, values, ways, periods, rung, [amp, amp], np.zeros(2), as_own, fixed,
+                       every=True, ring=ring)
     return [way[0] for way in found] if all(found) else []
 
 
@@ -162,7 +173,8 @@ def scan_shape(evaluate, cand: Candidate, base: Model, values: dict[str, float],
 
 def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float], ways: list[tuple], rungs: list[float],
                rung_probes, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
-               given: bool = True, local: bool = False, every: bool = False) -> list[list[tuple[dict[str, float], float]]]:
+               given: bool = True, local: bool = False, every: bool = False,
+               ring: list[tuple[float, np.ndarray]] = ()) -> list[list[tuple[dict[str, float], float]]]:
     """The scan of one nonlinear parameter over `rungs`: one simulation with the effect at its neutral values, one
     per `fixed` parameter at its probe (a column shared by all rungs), and at each rung those of `rung_probes(v)`
     ((values, the probe's step) each: the rung's own columns); the columns, with the rig's (`rig`: columns, values,
@@ -180,24 +192,30 @@ def scan_rungs(evaluate, cand: Candidate, base: Model, values: dict[str, float],
     watflex-6cc78dba, an elbow ripple of 0.56 N m at 1.23 rad: the rung at 1.05 rad was not among the three best
     first estimates and the fit ended at 0.34 rad, 8 x the noise; carried on, it scans at 6.5e5 against 0.36 rad's
     1.5e6). Either ranking alone loses cases the other finds (a dead-zone stand-in, test_diagnosis_stages); together
-    the scan is never worse than from the first three alone, whose steps are the same. One such list per way, in order
-    (all [] where the effect at neutral diverges)."""
+    the scan is never worse than from the first three alone, whose steps are the same. `ring`: (rung, coefficients)
+    points simulated too, the least costly at each rung a contender of its own (and among the values returned), where
+    the linear estimate is no guide (period_scans). One such list per way, in order (all [] where the effect at neutral
+    diverges)."""
     zero = {**values, **cand.neutral}
     probes = [(v, rung_probes(v)) for v in rungs]
+    at_ring = [{**zero, **dict(zip(fixed, map(float, x[:len(fixed)]))), **as_own(v, x[len(fixed):])} for v, x in ring]
     runs = evaluate([cand.model(base, zero)] + [cand.model(base, {**zero, n: cand.probe(n)}) for n in fixed]
-                    + [cand.model(base, {**zero, **p}) for _, ps in probes for p, _ in ps])
+                    + [cand.model(base, {**zero, **p}) for _, ps in probes for p, _ in ps]
+                    + [cand.model(base, v) for v in at_ring])
     if any(r is None for r in runs[:1 + len(fixed)]):
         return [[] for _ in ways]
+    runs, ringed = runs[:len(runs) - len(ring)], [(v, x, r) for (v, x), r in zip(ring, runs[len(runs) - len(ring):])]
     r0, shared = runs[0], [(r - runs[0]) / (cand.probe(n) - cand.neutral[n]) for n, r in zip(fixed, runs[1:])]
     return [_carry(evaluate, cand, base, given_values, cost, rig, probes, runs, r0, shared, rung_slots, rung_start,
-                   as_own, fixed, given, local, every) for cost, rig, given_values in ways]
+                   as_own, fixed, given, local, every, ringed) for cost, rig, given_values in ways]
 
 
 def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cost, rig: tuple, probes: list, runs: list,
            r0: np.ndarray, shared: list, rung_slots: list[Slot], rung_start: np.ndarray, as_own, fixed: list[str],
-           given: bool, local: bool, every: bool) -> list[tuple[dict[str, float], float]]:
+           given: bool, local: bool, every: bool, ringed: list = ()) -> list[tuple[dict[str, float], float]]:
     """scan_rungs' one way: the rungs ranked by their linear estimate beside `rig`'s columns (with `every`, also by
-    the simulated cost at it), the best carried on."""
+    the simulated cost at it), and the least costly `ringed` (rung, coefficients, residual) point at each rung, carried
+    on."""
     rig_columns, u_rig, lo_rig, hi_rig = rig
     slots = [cand.slots[n] for n in fixed] + rung_slots
     lo, hi = np.concatenate([lo_rig, [s.low for s in slots]]), np.concatenate([hi_rig, [s.high for s in slots]])
@@ -218,6 +236,14 @@ def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cos
             ranked.append((*estimate(columns, r0, start), v, columns))
     ranked.sort(key=lambda x: x[0])
     contenders = [(v, x, columns) for _, x, v, columns in (ranked if every else ranked[:PERIOD_CHECKED])]
+    ring_best = {}  # rung -> (cost, coefficients) of its least costly ring point
+    for v, x, r in ringed:
+        c = math.inf if r is None else cost(r)
+        if c < ring_best.get(v, (math.inf,))[0]:
+            ring_best[v] = (c, x)
+    rung_columns = {v: columns for _, _, v, columns in ranked}
+    from_ring = [(v, x) for v, (_, x) in ring_best.items() if v in rung_columns]
+    contenders += [(v, x, rung_columns[v]) for v, x in from_ring]
     sizes = range(len(fixed), len(start)) if local else range(0)  # the coefficients whose slopes are taken at x
     for _ in range(PERIOD_STEPS):  # Gauss-Newton steps with the probes' columns: a linear estimate in a closed loop
         nudges = [[_nudge(x, j, start, lo[len(u_rig) + j], hi[len(u_rig) + j]) for j in sizes] for _, x, _ in contenders]
@@ -234,6 +260,6 @@ def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cos
             moved.append((math.inf if r is None else cost(r), v, x if r is None else estimate(local_columns, r, x)[1], columns))
         least = sorted(range(len(moved)), key=lambda i: moved[i][0])[:PERIOD_CHECKED]  # by the simulated cost at x
         contenders = [m[1:] for i, m in enumerate(moved) if i < PERIOD_CHECKED or i in least]  # and the best first estimates
-    tried = [values] * given + [as_values(v, x) for v, x, _ in contenders]
+    tried = [values] * given + [as_values(v, x) for v, x, _ in contenders] + [as_values(v, x) for v, x in from_ring]
     costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
     return sorted(zip(tried, costs), key=lambda vc: vc[1])
