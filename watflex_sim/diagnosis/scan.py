@@ -260,6 +260,7 @@ def _carry(evaluate, cand: Candidate, base: Model, values: dict[str, float], cos
             moved.append((math.inf if r is None else cost(r), v, x if r is None else estimate(local_columns, r, x)[1], columns))
         least = sorted(range(len(moved)), key=lambda i: moved[i][0])[:PERIOD_CHECKED]  # by the simulated cost at x
         contenders = [m[1:] for i, m in enumerate(moved) if i < PERIOD_CHECKED or i in least]  # and the best first estimates
-    tried = [values] * given + [as_values(v, x) for v, x, _ in contenders] + [as_values(v, x) for v, x in from_ring]
+    tried = [values] * given + [as_values(v, x) for v, x, _ in contenders]
     costs = [math.inf if r is None else cost(r) for r in evaluate([cand.model(base, v) for v in tried])]
-    return sorted(zip(tried, costs), key=lambda vc: vc[1])
+    ring_tried = [(as_values(v, x), ring_best[v][0]) for v, x in from_ring]  # simulated already: their costs known
+    return sorted([*zip(tried, costs), *ring_tried], key=lambda vc: vc[1])
