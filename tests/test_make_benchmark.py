@@ -217,7 +217,9 @@ def test_existing_benchmark_is_refused(bench):
 
 
 @pytest.mark.parametrize("args", [["--rigs", "emps"], ["--effects", "gremlins"], ["--duration", "0"],
-                                  ["--per-effect", "-1"], []])
+                                  ["--per-effect", "-1"], [], ["--range", "stribeck_friction.v_s=0.3:0.1"],
+                                  ["--range", "stribeck_friction.v_s=0.1:9"], ["--range", "payload.speed=1:2"],
+                                  ["--rigs", "laser_arm", "--range", "table_tilt.angle=0.001:0.002"]])
 def test_cli_bad_arguments(args, tmp_path):
     argv = args + (["--out", str(tmp_path / "b")] if args else [])
     done = subprocess.run([sys.executable, str(ROOT / "tools" / "make_benchmark.py"), *argv],
@@ -369,3 +371,15 @@ def test_the_scorer_resumes_a_run_stopped_early(bench, tmp_path, monkeypatch):
     rows = json.loads((copy / "score.json").read_text())
     assert scored == ids[1:] and [r["id"] for r in rows] == ids and rows[0]["seconds"] == 7.0
 
+
+
+def test_a_range_beyond_the_benchmarks_is_drawn_from_and_kept_in_the_truth(tmp_path):
+    """--range (make_cases `ranges`): a Stribeck velocity drawn from 0.2-0.4 rad/s, beyond the benchmark's own
+    0.005-0.03 on the laser arm, on that run only (RANGES as before afterwards), and truth.json says so."""
+    before = json.dumps(mb.RANGES, sort_keys=True)
+    truth = mb.make_cases(tmp_path, **dict(ARGS, rigs=("laser_arm",), effects=["stribeck_friction"], clean=0),
+                          ranges={"stribeck_friction.v_s": (0.2, 0.4)})
+    (case,) = truth["cases"]
+    assert 0.2 <= case["parameters"]["v_s"] <= 0.4
+    assert truth["ranges"] == {"stribeck_friction.v_s": [0.2, 0.4]}
+    assert json.dumps(mb.RANGES, sort_keys=True) == before

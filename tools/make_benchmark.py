@@ -2,6 +2,7 @@
 
 Usage: python tools/make_benchmark.py --out DIR [--seed 0] [--rigs laser_arm,watflex]
            [--per-effect 1] [--clean 3] [--hard 2] [--pairs 2] [--effects a,b] [--duration 6] [--segments 30 --step-divisor 2]
+           [--range stribeck_friction.v_s=0.1:0.3]
 
 A case is what a user would bring: three simulated recordings (noise on, a seed each) of one
 rig with one catalogue effect added, listed in a shuffled order (the diagnosis must not depend on it):
@@ -42,6 +43,7 @@ excites them); effects a rig description does not allow.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import json
 import math
@@ -405,10 +407,12 @@ def make_pair_case(rig: str, effects: list[str], k: int, seed: int, duration: fl
 
 def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1, clean: int = 3,
                duration: float = 6.0, log=lambda line: print(line, flush=True), hard: int = 0,
-               segments: int = 0, step_divisor: int = 1, pairs: int = 0, setup: str = "single_link") -> dict:
+               segments: int = 0, step_divisor: int = 1, pairs: int = 0, setup: str = "single_link",
+               ranges: dict[str, tuple[float, float]] | None = None) -> dict:
     """Write the benchmark into `out` (cases/<id>/<stem>.csv/.json, truth.json); return the truth.
     `segments`, `step_divisor`: the recording simulator's discretisation (recorder_of; default ours);
-    `setup`: the Watflex set-up (WATFLEX_SETUPS).
+    `setup`: the Watflex set-up (WATFLEX_SETUPS); `ranges`: "effect.parameter" -> (low, high) drawn from
+    instead of RANGES' span on every rig (`wider_ranges`; the draw's kind kept).
 
     truth.json: {"format", "seed", "generator", "cases": [{"id", "rig", "kind" (effect, clean, pair or one of
     HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
@@ -432,6 +436,40 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
         plan += [(rig, kind, k) for kind in HARD_KINDS for k in range(hard)]
         plan += [(rig, "pair", k) for k in range(pairs)]
     cases = []
+    with wider_ranges(ranges or {}):
+        _make_planned(out, plan, seed, effects, duration, log, segments, step_divisor, setup, cases, skipped)
+    order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
+             "concealment", "duration_s", "others")
+    truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
+             "cases": [{k: c[k] for k in order if k in c} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
+             "recorder": {"segments": segments, "step_divisor": step_divisor}, "watflex_setup": setup}
+    if ranges:
+        truth["ranges"] = {name: list(span) for name, span in ranges.items()}
+    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return truth
+
+
+@contextlib.contextmanager
+def wider_ranges(ranges: dict[str, tuple[float, float]]):
+    """RANGES with each "effect.parameter" -> (low, high) of `ranges` drawn from instead, on every rig and place that
+    has it, while the block runs (a probe beyond the benchmark's magnitudes: a Stribeck velocity of 0.1-0.5 rad/s)."""
+    saved = copy.deepcopy(RANGES)
+    try:
+        for name, (low, high) in ranges.items():
+            effect, _, param = name.partition(".")
+            for table in RANGES.values():
+                for key, entry in table.items():
+                    if key.partition(":")[0] == effect and param in entry:
+                        entry[param] = (entry[param][0], low, high)
+        yield
+    finally:
+        RANGES.clear()
+        RANGES.update(saved)
+
+
+def _make_planned(out: Path, plan: list, seed: int, effects: list, duration: float, log, segments: int,
+                  step_divisor: int, setup: str, cases: list, skipped: list) -> None:
+    """Simulate and write each planned (rig, effect or kind, k) case, appending its truth to `cases`."""
     for n, (rig, effect, k) in enumerate(plan, 1):
         start = time.perf_counter()
         recorder = recorder_of(rig, segments, step_divisor)
@@ -450,13 +488,26 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
         log(f"[{n}/{len(plan)}] {truth['id']}: {named or 'clean'}"
             f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
             f"{time.perf_counter() - start:.1f} s")
-    order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
-             "concealment", "duration_s", "others")
-    truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
-             "cases": [{k: c[k] for k in order if k in c} for c in sorted(cases, key=lambda c: c["id"])], "skipped": skipped,
-             "recorder": {"segments": segments, "step_divisor": step_divisor}, "watflex_setup": setup}
-    (out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
-    return truth
+
+
+def parse_range(text: str, rigs: list[str]) -> tuple[str, tuple[float, float]]:
+    """"effect.parameter=low:high" -> ("effect.parameter", (low, high)), checked against the catalogue's bounds and the
+    benchmark's draws of `rigs`; ValueError (one line) otherwise."""
+    name, _, span = text.partition("=")
+    effect, _, param = name.partition(".")
+    params = {p.name: p for p in CATALOGUE.get(effect, (None, ()))[1]}
+    if param not in params:
+        raise ValueError(f"--range {text!r}: not EFFECT.PARAM=LOW:HIGH with a catalogue effect and its parameter")
+    try:
+        low, high = (float(v) for v in span.split(":"))
+    except ValueError:
+        raise ValueError(f"--range {text!r}: LOW:HIGH must be two numbers") from None
+    p = params[param]
+    if not (math.isfinite(low) and math.isfinite(high) and low < high) or not p.scale and not p.low <= low < high <= p.high:
+        raise ValueError(f"--range {text!r}: need LOW < HIGH within the catalogue's {p.low:g} .. {p.high:g} {p.unit}")
+    if not any(param in entry for rig in rigs for key, entry in RANGES[rig].items() if key.partition(":")[0] == effect):
+        raise ValueError(f"--range {text!r}: the benchmark draws no {name} on {', '.join(rigs)}")
+    return name, (low, high)
 
 
 def main(argv=None) -> int:
@@ -484,6 +535,10 @@ def main(argv=None) -> int:
     parser.add_argument("--watflex-setup", choices=WATFLEX_SETUPS, default="single_link",
                         help="Watflex experiments: the elbow ones with the shoulder locked (default), or steps of "
                              "both joints under observer control, both links flexible (two_joint; ~3x the cost)")
+    parser.add_argument("--range", action="append", default=[], metavar="EFFECT.PARAM=LOW:HIGH",
+                        help="draw an effect parameter from LOW..HIGH (its unit in the catalogue) on every rig instead "
+                             "of the benchmark's span, e.g. stribeck_friction.v_s=0.1:0.3 (repeatable; truth.json "
+                             "\"ranges\" keeps them)")
     args = parser.parse_args(argv)
     rigs = [r for r in args.rigs.split(",") if r]
     effects = [e for e in args.effects.split(",") if e] or None
@@ -492,6 +547,10 @@ def main(argv=None) -> int:
     if effects and set(effects) - set(CATALOGUE):
         parser.error(f"unknown effect(s) {', '.join(sorted(set(effects) - set(CATALOGUE)))} "
                      f"(catalogue: {', '.join(CATALOGUE)})")
+    try:
+        ranges = dict(parse_range(text, rigs) for text in args.range)
+    except ValueError as exc:
+        parser.error(str(exc))
     if args.per_effect < 0 or args.clean < 0 or args.hard < 0 or args.pairs < 0:
         parser.error("--per-effect, --clean, --hard and --pairs must be >= 0")
     if args.segments != 0 and not 2 <= args.segments <= 100 or args.step_divisor < 1:
@@ -502,7 +561,7 @@ def main(argv=None) -> int:
     try:
         truth = make_cases(args.out, args.seed, rigs, effects, args.per_effect, args.clean, args.duration, hard=args.hard,
                            segments=args.segments, step_divisor=args.step_divisor, pairs=args.pairs,
-                           setup=args.watflex_setup)
+                           setup=args.watflex_setup, ranges=ranges)
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
     for s in truth["skipped"]:
