@@ -418,7 +418,8 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     HARD_KINDS), "recordings" (paths relative to `out`, shuffled), "effect" | null, "where" | null, "parameters",
     "units", "refit_parameters" (rig parameter -> ratio), "concealment" | null, "duration_s", and for a pair
     "others": [{"effect", "where", "parameters", "units"}]}],
-    "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}, "watflex_setup"}. `effects` None: the whole catalogue.
+    "skipped": [{"rig", "effect", "why"}], "recorder": {"segments", "step_divisor"}, "watflex_setup", and with `ranges`
+    "ranges": {"effect.parameter": [low, high]}}. `effects` None: the whole catalogue.
     """
     out = Path(out)
     if (out / "truth.json").exists() or (out / "cases").exists():
