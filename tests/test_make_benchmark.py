@@ -372,7 +372,6 @@ def test_the_scorer_resumes_a_run_stopped_early(bench, tmp_path, monkeypatch):
     assert scored == ids[1:] and [r["id"] for r in rows] == ids and rows[0]["seconds"] == 7.0
 
 
-
 def test_a_range_beyond_the_benchmarks_is_drawn_from_and_kept_in_the_truth(tmp_path):
     """--range (make_cases `ranges`): a Stribeck velocity drawn from 0.2-0.4 rad/s, beyond the benchmark's own
     0.005-0.03 on the laser arm, on that run only (RANGES as before afterwards), and truth.json says so."""

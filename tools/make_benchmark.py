@@ -438,7 +438,24 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
         plan += [(rig, "pair", k) for k in range(pairs)]
     cases = []
     with wider_ranges(ranges or {}):
-        _make_planned(out, plan, seed, effects, duration, log, segments, step_divisor, setup, cases, skipped)
+        for n, (rig, effect, k) in enumerate(plan, 1):
+            start = time.perf_counter()
+            recorder = recorder_of(rig, segments, step_divisor)
+            made = (make_pair_case(rig, effects, k, seed, duration, recorder, setup) if effect == "pair"
+                    else make_case(rig, effect, k, seed, duration, recorder, setup))
+            if made is None:
+                skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
+                continue
+            truth, recordings = made
+            directory = out / "cases" / truth["id"]
+            paths = [write_recording(rec, directory, stem) for stem, rec in recordings]
+            order = _rng(seed, f"order/{truth['id']}").permutation(len(paths))  # the diagnosis must not depend on it
+            truth["recordings"] = [paths[i].relative_to(out).as_posix() for i in order]
+            cases.append(truth)
+            named = "+".join(e["effect"] for e in [truth, *truth.get("others", [])]) if effect == "pair" else effect
+            log(f"[{n}/{len(plan)}] {truth['id']}: {named or 'clean'}"
+                f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
+                f"{time.perf_counter() - start:.1f} s")
     order = ("id", "rig", "kind", "recordings", "effect", "where", "parameters", "units", "refit_parameters",
              "concealment", "duration_s", "others")
     truth = {"format": FORMAT, "seed": seed, "generator": "tools/make_benchmark.py",
@@ -450,6 +467,11 @@ def make_cases(out, seed: int = 0, rigs=RIGS, effects=None, per_effect: int = 1,
     return truth
 
 
+def _drawing(effect: str, param: str, rigs) -> list[dict]:
+    """The RANGES entries of `rigs` (any place) that draw `effect`'s parameter `param`."""
+    return [entry for rig in rigs for key, entry in RANGES[rig].items() if key.partition(":")[0] == effect and param in entry]
+
+
 @contextlib.contextmanager
 def wider_ranges(ranges: dict[str, tuple[float, float]]):
     """RANGES with each "effect.parameter" -> (low, high) of `ranges` drawn from instead, on every rig and place that
@@ -458,37 +480,12 @@ def wider_ranges(ranges: dict[str, tuple[float, float]]):
     try:
         for name, (low, high) in ranges.items():
             effect, _, param = name.partition(".")
-            for table in RANGES.values():
-                for key, entry in table.items():
-                    if key.partition(":")[0] == effect and param in entry:
-                        entry[param] = (entry[param][0], low, high)
+            for entry in _drawing(effect, param, RANGES):
+                entry[param] = (entry[param][0], low, high)
         yield
     finally:
         RANGES.clear()
         RANGES.update(saved)
-
-
-def _make_planned(out: Path, plan: list, seed: int, effects: list, duration: float, log, segments: int,
-                  step_divisor: int, setup: str, cases: list, skipped: list) -> None:
-    """Simulate and write each planned (rig, effect or kind, k) case, appending its truth to `cases`."""
-    for n, (rig, effect, k) in enumerate(plan, 1):
-        start = time.perf_counter()
-        recorder = recorder_of(rig, segments, step_divisor)
-        made = (make_pair_case(rig, effects, k, seed, duration, recorder, setup) if effect == "pair"
-                else make_case(rig, effect, k, seed, duration, recorder, setup))
-        if made is None:
-            skipped.append({"rig": rig, "effect": effect, "why": "diverged at every magnitude drawn"})
-            continue
-        truth, recordings = made
-        directory = out / "cases" / truth["id"]
-        paths = [write_recording(rec, directory, stem) for stem, rec in recordings]
-        order = _rng(seed, f"order/{truth['id']}").permutation(len(paths))  # the diagnosis must not depend on it
-        truth["recordings"] = [paths[i].relative_to(out).as_posix() for i in order]
-        cases.append(truth)
-        named = "+".join(e["effect"] for e in [truth, *truth.get("others", [])]) if effect == "pair" else effect
-        log(f"[{n}/{len(plan)}] {truth['id']}: {named or 'clean'}"
-            f"{'@' + truth['where'] if truth['where'] else ''} ({truth['concealment'] or 'parameters only'}) "
-            f"{time.perf_counter() - start:.1f} s")
 
 
 def parse_range(text: str, rigs: list[str]) -> tuple[str, tuple[float, float]]:
@@ -506,7 +503,7 @@ def parse_range(text: str, rigs: list[str]) -> tuple[str, tuple[float, float]]:
     p = params[param]
     if not (math.isfinite(low) and math.isfinite(high) and low < high) or not p.scale and not p.low <= low < high <= p.high:
         raise ValueError(f"--range {text!r}: need LOW < HIGH within the catalogue's {p.low:g} .. {p.high:g} {p.unit}")
-    if not any(param in entry for rig in rigs for key, entry in RANGES[rig].items() if key.partition(":")[0] == effect):
+    if not _drawing(effect, param, rigs):
         raise ValueError(f"--range {text!r}: the benchmark draws no {name} on {', '.join(rigs)}")
     return name, (low, high)
 
