@@ -27,7 +27,9 @@ import dataclasses
 import math
 from typing import Mapping
 
-from watflex_sim.friction import slope_limited
+import numpy as np
+
+from watflex_sim.friction import slope_limited, slope_limited_columns
 from watflex_sim.params import CONTROL_PERIOD, Friction
 
 from .filters import Butterworth2
@@ -100,6 +102,56 @@ class FrictionCompensation:
         tau = float(out.get(self.channel, 0.0))
         self.compensation = self.torque(tau, self.velocity)
         out[self.channel] = tau + self.compensation
+        return out
+
+    @classmethod
+    def columns(cls, members: list["FrictionCompensation"], times: np.ndarray) -> "FrictionCompensationColumns | None":
+        """The members' compensation on arrays around their inner controllers' column form (lockstep's columns), or
+        None unless they share joint and scheme, their inner controllers have a column form, and none has run."""
+        first = members[0]
+        if any(type(m).__call__ is not FrictionCompensation.__call__ or m.joint != first.joint or m.scheme != first.scheme
+               or type(m.inner) is not type(first.inner) or m._previous is not None or m.filter.z1 is not None
+               for m in members):
+            return None
+        form = getattr(type(first.inner), "columns", None)
+        inner = form([m.inner for m in members], times) if form is not None else None
+        return None if inner is None else FrictionCompensationColumns(members, inner)
+
+
+class FrictionCompensationColumns:
+    """FrictionCompensation of B members at once, on arrays of shape (B,): the same arithmetic, member by member
+    (the slope-limited schemes on arrays; the feed-forward ones through each member's own `torque`)."""
+
+    def __init__(self, members: list[FrictionCompensation], inner):
+        first = members[0]
+        self.members, self.inner = members, inner
+        self.joint, self.channel, self.scheme = first.joint, first.channel, first.scheme
+        self.filter = first.filter.columns([m.filter for m in members])
+        for name in ("k_s", "k_gamma", "k_tau", "delta", "period"):
+            setattr(self, name, np.array([getattr(m, name) for m in members], dtype=float))
+        fields = [f.name for f in dataclasses.fields(first.positive)]
+        self.positive, self.negative = ({f: np.array([getattr(getattr(m, side), f) for m in members], dtype=float)
+                                         for f in fields} for side in ("positive", "negative"))
+        self._previous = None
+
+    def torque(self, tau: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """FrictionCompensation.torque of each member (N m)."""
+        if self.scheme == "velocity_fb":
+            return slope_limited_columns(v, self.positive, self.negative, self.k_s)
+        if self.scheme == "qualified":
+            gamma = np.minimum(self.k_gamma * np.abs(v), 1.0)
+            v_tilde = gamma * v + (1.0 - gamma) * self.k_tau * np.maximum(-self.delta, np.minimum(self.delta, tau))
+            return slope_limited_columns(v_tilde, self.positive, self.negative, self.k_s)
+        return np.array([m.torque(a, b) for m, a, b in zip(self.members, tau.tolist(), v.tolist())])
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out = dict(self.inner(t, obs))
+        theta = obs[f"{self.joint}_angle"]
+        prev = self._previous
+        velocity = self.filter(np.zeros(len(self.period)) if prev is None else (theta - prev) / self.period)
+        self._previous = theta
+        tau = np.asarray(out.get(self.channel, np.zeros(len(self.period))), dtype=float)
+        out[self.channel] = tau + self.torque(tau, velocity)
         return out
 
 

@@ -29,6 +29,7 @@ second-order error dynamics e'' + 2a e' + a^2 e and a two-state observer with po
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Mapping, Sequence
 
@@ -94,6 +95,17 @@ def discrete_observer(A: np.ndarray, b: np.ndarray, c: np.ndarray, p: float, per
     return Phi, Gamma, np.linalg.solve(Phi, L)
 
 
+@functools.lru_cache(maxsize=64)
+def _designed(j_m: float, j_a: float, k: float, b_m: float, b_a: float, p: float, period: float, rigid: bool) -> tuple:
+    """(A, b, c, Phi, Gamma, M) of one joint's model and observer, computed once per design (read-only arrays): a
+    matrix exponential costs ~6 ms, and a diagnosis sets up thousands of simulations of the same controller."""
+    A, b, c = rigid_model(j_m + j_a, b_m + b_a) if rigid else flexible_model(j_m, j_a, k, b_m, b_a)
+    out = (A, b, c, *discrete_observer(A, b, c, p, period))
+    for array in out:
+        array.flags.writeable = False
+    return out
+
+
 class ObserverJoint:
     """The recursive observer-based controller of one joint (see module docstring).
 
@@ -112,49 +124,90 @@ class ObserverJoint:
                 raise ValueError(f"observer: {name} must be > 0, got {value} (a, p are rates: poles at -a, -p)")
         self.j_m, self.j_a, self.k, self.b_m, self.b_a = float(j_m), float(j_a), float(k), float(b_m), float(b_a)
         self.a, self.p, self.rigid, self.limit, self.period = float(a), float(p), bool(rigid), float(limit), float(period)
-        if rigid:
-            self.A, self.b, self.c = rigid_model(j_m + j_a, b_m + b_a)
-            self.gamma = float(gamma) if gamma is not None else j_m + j_a
-        else:
-            self.A, self.b, self.c = flexible_model(j_m, j_a, k, b_m, b_a)
-            self.gamma = float(gamma) if gamma is not None else j_a * j_m / k
-        self.Phi, self.Gamma, self.M = discrete_observer(self.A, self.b, self.c, self.p, self.period)
+        self.A, self.b, self.c, self.Phi, self.Gamma, self.M = _designed(self.j_m, self.j_a, self.k, self.b_m, self.b_a,
+                                                                         self.p, self.period, self.rigid)
+        self.gamma = float(gamma) if gamma is not None else (j_m + j_a if rigid else j_a * j_m / k)
+        self._law = self.law()
         self.reset()
 
     def reset(self) -> None:
-        self._predicted = None  # x^[n | n-1]
+        self._predicted = None  # x^[n | n-1], floats
         self.estimate = np.zeros(self.A.shape[0])
         self.tau = 0.0
 
-    def sigma(self, x: np.ndarray, tau: float, theta_d: float) -> float:
+    def law(self) -> "_Law":
+        """This joint's constants as `_Law` (floats): what `step` computes with."""
+        jm, ja, k, bm, ba, a = self.j_m, self.j_a, self.k, self.b_m, self.b_a, self.a
+        if self.rigid:  # sigma = a^2 (theta_d - th) - acc - 2 a w, acc = (tau - b w) / j
+            sigma = (a * a, 2 * a, self.b_m + self.b_a, self.j_m + self.j_a)
+        else:  # eq. 5.17's coefficients a0..a4
+            sigma = (a**4, 4 * a**3 - 4 * a * k / ja + k * ba / ja**2, 6 * a**2 - 4 * a * ba / ja - k / ja + ba**2 / ja**2,
+                     k / ja * (4 * a - ba / ja), k / ja)
+        return _Law(self.rigid, sigma, (jm, ja, k, bm, ba), self.gamma, self.limit,
+                    [[float(v) for v in row] for row in self.Phi], [float(v) for v in self.Gamma], [float(v) for v in self.M])
+
+    def sigma(self, x, tau: float, theta_d: float) -> float:
         """Error dynamics sigma (rad/s^4 flexible, rad/s^2 rigid) of eq. 5.17 at state x, torque tau (N m)."""
-        a = self.a
-        if self.rigid:
-            th, w = x
-            acc = (tau - (self.b_m + self.b_a) * w) / (self.j_m + self.j_a)
-            return a * a * (theta_d - th) - acc - 2 * a * w
-        tm, ta, wm, wa = x
-        jm, ja, k, bm, ba = self.j_m, self.j_a, self.k, self.b_m, self.b_a
-        acc_m = (tau - bm * wm - k * (tm - ta)) / jm  # eq. 5.14
-        acc_a = (k * (tm - ta) - ba * wa) / ja
-        a0 = a**4
-        a1 = 4 * a**3 - 4 * a * k / ja + k * ba / ja**2
-        a2 = 6 * a**2 - 4 * a * ba / ja - k / ja + ba**2 / ja**2
-        a3 = k / ja * (4 * a - ba / ja)
-        a4 = k / ja
-        return a0 * theta_d - a4 * acc_m - a3 * wm - a2 * acc_a - a1 * wa - a0 * ta
+        return self._law.sigma(list(x), tau, theta_d)
 
     def step(self, theta_m: float, theta_d: float) -> float:
         """One control period: encoder angle and desired angle (rad) -> torque (N m) for the next period."""
+        law = self._law
         if self._predicted is None:  # start at rest at the first measurement
-            self._predicted = np.zeros_like(self.estimate)
-            self._predicted[: 1 if self.rigid else 2] = theta_m
-        x = self._predicted + self.M * (theta_m - self._predicted[0])
-        tau = self.tau + self.gamma * self.sigma(x, self.tau, theta_d)  # eq. 5.15
-        tau = min(max(tau, -self.limit), self.limit)
-        self.estimate, self.tau = x, tau
-        self._predicted = self.Phi @ x + self.Gamma * tau
-        return tau
+            self._predicted = law.at_rest(theta_m, 0.0)
+        x, self.tau, self._predicted = law.step(self._predicted, self.tau, theta_m, theta_d, _clip)
+        self.estimate = np.array(x)
+        return self.tau
+
+
+def _clip(x: float, low: float, high: float) -> float:
+    return min(max(x, low), high)
+
+
+def _clip_columns(x: np.ndarray, low, high) -> np.ndarray:
+    return np.minimum(np.maximum(x, low), high)
+
+
+class _Law:
+    """Eq. 5.15-5.20 of one joint, one period, on floats (ObserverJoint) or on arrays of shape (B,) with one
+    member's constants in each place (ObserverColumns): the same operations in the same order, so the two give
+    each member the same numbers bit for bit (Phi x written out as sums, never a BLAS product, whose order differs).
+    `sigma_coefficients`: (a^2, 2a, b_m + b_a, j_m + j_a) rigid, eq. 5.17's (a0, a1, a2, a3, a4) flexible;
+    `plant`: (j_m, j_a, k, b_m, b_a); Phi (rows), Gamma, M as lists."""
+
+    def __init__(self, rigid, sigma_coefficients, plant, gamma, limit, phi, gamma_in, m):
+        self.rigid, self.coefficients, self.plant = rigid, sigma_coefficients, plant
+        self.gamma, self.limit, self.phi, self.gamma_in, self.m = gamma, limit, phi, gamma_in, m
+
+    def at_rest(self, theta_m, zero):
+        """The predicted state at rest at the first encoder angle (rad): angles theta_m, rates 0."""
+        return [theta_m, zero] if self.rigid else [theta_m, theta_m, zero, zero]
+
+    def sigma(self, x: list, tau, theta_d):
+        if self.rigid:
+            a2, two_a, b, j = self.coefficients
+            th, w = x
+            acc = (tau - b * w) / j
+            return a2 * (theta_d - th) - acc - two_a * w
+        tm, ta, wm, wa = x
+        jm, ja, k, bm, ba = self.plant
+        acc_m = (tau - bm * wm - k * (tm - ta)) / jm  # eq. 5.14
+        acc_a = (k * (tm - ta) - ba * wa) / ja
+        a0, a1, a2, a3, a4 = self.coefficients
+        return a0 * theta_d - a4 * acc_m - a3 * wm - a2 * acc_a - a1 * wa - a0 * ta
+
+    def step(self, predicted: list, tau, theta_m, theta_d, clip):
+        """(estimate x[n|n], torque (N m) for the next period, prediction x[n+1|n]) from x[n|n-1], the last torque."""
+        e = theta_m - predicted[0]
+        x = [p + m * e for p, m in zip(predicted, self.m)]
+        tau = clip(tau + self.gamma * self.sigma(x, tau, theta_d), -self.limit, self.limit)  # eq. 5.15
+        ahead = []
+        for row, g in zip(self.phi, self.gamma_in):
+            total = row[0] * x[0]
+            for r, v in zip(row[1:], x[1:]):
+                total = total + r * v
+            ahead.append(total + g * tau)
+        return x, tau, ahead
 
 
 class Observer:
@@ -197,6 +250,50 @@ class Observer:
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         return {ch: u.step(obs[f"{j}_angle"], obs[f"{j}_reference"])
                 for j, ch, u in zip(self.joints, self.channels, self.units)}
+
+    @classmethod
+    def columns(cls, members: list["Observer"], times: np.ndarray) -> "ObserverColumns | None":
+        """The members' law on arrays (lockstep's columns), or None unless they share its form and have not run."""
+        first = members[0]
+        if any(type(m).__call__ is not Observer.__call__ or m.joints != first.joints
+               or any(u.rigid != v.rigid or u._predicted is not None or u.tau != 0.0 for u, v in zip(m.units, first.units))
+               for m in members):
+            return None
+        return ObserverColumns(members)
+
+
+class ObserverColumns:
+    """Observer of B members at once, on arrays of shape (B,): each joint's `_Law` with the members' constants
+    as arrays, the same arithmetic, member by member."""
+
+    def __init__(self, members: list[Observer]):
+        first = members[0]
+        self.joints, self.channels = first.joints, first.channels
+        self.laws = [_stacked([m.units[i]._law for m in members]) for i in range(len(self.joints))]
+        self.predicted = [None] * len(self.joints)
+        self.tau = [np.zeros(len(members)) for _ in self.joints]  # N m
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out = {}
+        for i, (j, channel, law) in enumerate(zip(self.joints, self.channels, self.laws)):
+            theta = obs[f"{j}_angle"]
+            if self.predicted[i] is None:
+                self.predicted[i] = law.at_rest(theta, np.zeros(len(self.tau[i])))
+            _, self.tau[i], self.predicted[i] = law.step(self.predicted[i], self.tau[i], theta, obs[f"{j}_reference"],
+                                                         _clip_columns)
+            out[channel] = self.tau[i]
+        return out
+
+
+def _stacked(laws: list[_Law]) -> _Law:
+    """One `_Law` whose every constant is the array (B,) of the members' (same form: rigid or not)."""
+    column = lambda values: np.array(values, dtype=float)  # noqa: E731
+    first = laws[0]
+    return _Law(first.rigid, tuple(column(v) for v in zip(*(law.coefficients for law in laws))),
+                tuple(column(v) for v in zip(*(law.plant for law in laws))),
+                column([law.gamma for law in laws]), column([law.limit for law in laws]),
+                [[column([law.phi[r][c] for law in laws]) for c in range(len(first.phi))] for r in range(len(first.phi))],
+                [column(v) for v in zip(*(law.gamma_in for law in laws))], [column(v) for v in zip(*(law.m for law in laws))])
 
 
 def make_observer(friction_compensation: Mapping | None = None, **kwargs):

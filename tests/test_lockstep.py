@@ -247,3 +247,95 @@ def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(built, rig, 
     for r, sim in zip(ratios, together):
         alone = resimulate(rec, [], {name: r}, until=2.0, noise_seed=noise_seed, rig=description)
         assert all(np.array_equal(sim.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels), r
+
+
+def test_the_observer_and_its_friction_compensation_run_on_arrays_and_match_single_runs(built):
+    """Observer.columns and FrictionCompensation.columns (controllers/): the two-joint observer with the qualified
+    compensation at both joints (the benchmark's two-joint set-up, whose lockstep calls spent ~55 % of their time in
+    each member's control half before), the rigid observer with members' poles unlike, and every other scheme with
+    the members' slope factors unlike give each member its single run's numbers, bit for bit (the observer's Phi x is
+    written out as sums in both drivers: a BLAS product sums in another order). A compensation around a controller
+    with no column form (passivity) has none either, and runs apart."""
+    from watflex_sim.controllers.friction_compensation import SCHEMES
+    from watflex_sim.columns import ColumnControl
+    from watflex_sim.engine import ControlLoop
+
+    cases = [("watflex_observer_two_joint", [[], []]),
+             ("watflex_observer_step", [["controller.rigid=true"], ["controller.rigid=true", "controller.a=[12.0]"]])]
+    cases += [("watflex_observer_step", [[f"controller.compensation.scheme='{scheme}'", f"controller.compensation.k_s={k}"]
+                                         for k in (250.0, 300.0)]) for scheme in SCHEMES if scheme != "qualified"]
+    for name, sets in cases:
+        built.clear()
+        _compare([load_scenario(name, ["duration_s=1.5", f"seed={s}", *extra]) for s, extra in enumerate(sets, 1)])
+        assert built and all(c is not None for c in built), (name, sets)
+    assert not ColumnControl.fits([ControlLoop(load_scenario("watflex_passivity_trajectory", ["duration_s=0.1"]))])
+
+
+def test_members_whose_sensors_read_other_joints_run_in_classes_on_arrays(built):
+    """lockstep._alike: a two-joint recording re-simulated with a backlash added at the elbow and at the shoulder -
+    models of one structure whose encoders read other coordinates, as a diagnosis' backlash and compliance probes
+    are - runs as two batches on arrays, not as one on per-member control; every member equals its run alone."""
+    from watflex_sim.resim import resimulate, resimulate_many
+
+    rec = simulate(load_scenario("watflex_observer_two_joint", ["duration_s=1.2", "seed=4"])).recording
+    jobs = [(rec, [{"effect": "backlash", "where": joint, "width": width, "position": 0.0}], {})
+            for joint in ("elbow", "shoulder") for width in (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)]
+    together = resimulate_many(jobs, nthread=1)
+    assert len(built) == 2 and all(c is not None for c in built)
+    for job, sim in zip(jobs, together):
+        alone = resimulate(*job)
+        assert all(np.array_equal(sim.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels), job[1]
+
+
+def test_a_settled_start_kept_from_before_gives_the_same_recording():
+    """engine._settle_bearings keeps the settled MjData of the last models it settled (by a digest of the whole
+    model): a run that starts from that copy records what a run that settles again records, bit for bit, and
+    another model (a payload) is settled anew, not given the first one's start."""
+    import mujoco
+
+    from watflex_sim import engine
+    from watflex_sim.model import load_model
+
+    model = load_model("watflex")
+    states = []
+    engine._SETTLED.clear()
+    for _ in range(2):  # settled, then from the copy kept
+        data = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, data, 0)
+        mujoco.mj_forward(model, data)
+        engine._settle_bearings(model, data)
+        state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
+        mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        states.append(state)
+    assert len(engine._SETTLED) == 1 and np.array_equal(states[0], states[1])
+    scenario = load_scenario("watflex_observer_two_joint", ["duration_s=1.2", "seed=3"])
+    engine._SETTLED.clear()
+    fresh = simulate(scenario).recording
+    assert len(engine._SETTLED) == 1
+    kept = simulate(scenario).recording
+    assert all(np.array_equal(fresh.channels[c], kept.channels[c], equal_nan=True) for c in fresh.channels)
+    simulate(load_scenario("watflex_observer_two_joint", ["duration_s=0.01", "payload_kg=0.5"]))
+    assert len(engine._SETTLED) == 2
+
+
+def test_a_generated_model_kept_from_before_compiles_to_the_same_model():
+    """model._generated keeps the spec a model generator built for a segment count and hands out copies: a model
+    loaded from the copy is the one built anew, byte for byte (mj_saveModel), and an edit of one copy (a payload)
+    leaves the next one as it was."""
+    import hashlib
+
+    import mujoco
+
+    from watflex_sim import model as models
+
+    def digest(model):
+        buffer = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+        mujoco.mj_saveModel(model, None, buffer)
+        return hashlib.sha1(buffer.tobytes()).hexdigest()
+
+    for rig, n in (("watflex", 7), ("laser_arm", 4)):
+        models._GENERATED.clear()
+        built = digest(models.load_model(rig, n_segments=n))
+        assert len(models._GENERATED) == 1
+        edited = digest(models.load_model(rig, n_segments=n, payload_kg=0.3))
+        assert edited != built and digest(models.load_model(rig, n_segments=n)) == built

@@ -12,10 +12,11 @@ Usage: python tools/bench.py [--quick] [--profile SCENARIO] [...]
    locks, no payload), bare mj_step per step and real-time factor at the rig's timestep.
 3. Optional (--profile): a cProfile breakdown of the control loop in us per control tick.
 5. Lockstep (watflex_sim.lockstep): per-simulation cost in batches of 1, 8, 32, 128 against bare
-   mj_step on laser_arm_step and watflex_elbow_step, 1 vs 2 threads, where the time goes, and a
+   mj_step on laser_arm_step, watflex_elbow_step and watflex_observer_two_joint (the observer with friction
+   compensation at both joints: the benchmark's two-joint set-up), 1 vs 2 threads, where the time goes, and a
    sweep's runs per second against its bare-physics limit.
 6. When a lockstep batch pays: B = 2..32 runs in lockstep on one thread against one by one (laser arm with and
-   without hub friction, Watflex), and the driver simulate_batch picks.
+   without hub friction, Watflex with a PD and with the two-joint observer), and the driver simulate_batch picks.
 
 Every timing is run --repeats times (default 3) and the best is reported. The default run
 takes well under 2 minutes on 2 cores; --quick caps scenarios at 1 s simulated and the sweep
@@ -589,7 +590,7 @@ def bench_lockstep(args) -> str:
     duration = 0.5 if args.quick else 1.0
     sizes = LOCKSTEP_SIZES[:3] if args.quick else LOCKSTEP_SIZES
     rows, lines = [], []
-    for name in ("laser_arm_step", "watflex_elbow_step"):
+    for name in ("laser_arm_step", "watflex_elbow_step", "watflex_observer_two_joint"):
         scenario = load_scenario(name, [f"duration_s={duration}"])
         model, start, n_sub = initial_state(scenario)
         steps = round(duration / CONTROL_PERIOD) * n_sub
@@ -695,7 +696,8 @@ def bench_pays(args) -> str:
     from watflex_sim.lockstep import ControlLoop, _pays, simulate_batch
 
     duration = 0.5 if args.quick else 1.0
-    cases = (("laser_arm_step", []), ("laser_arm_step (hub Coulomb friction)", [HUB_COULOMB]), ("watflex_elbow_step", []))
+    cases = (("laser_arm_step", []), ("laser_arm_step (hub Coulomb friction)", [HUB_COULOMB]), ("watflex_elbow_step", []),
+             ("watflex_observer_two_joint", []))
     rows = []
     for label, sets in cases:
         name = label.split()[0]

@@ -5,16 +5,17 @@ here the same arithmetic runs once per tick on arrays of shape (B,) and gives, m
 same numbers (tests/test_lockstep.py compares every channel with tolerance 0): the rig's sensors and
 converters (LaserColumns, WatflexColumns: encoders, strain bridges, camera, tip sensor, current
 monitor, converters and saturation; GenericColumns: a rig described as data), the controller's column
-form (`columns` of PID, StateFeedback and OpenLoop, in controllers/), the references and the noise tabulated at set-up
-(rigs.NoiseStream.take: the draws the single run makes, in its order), the recording written as
-columns. Where the single run calls math.atan2 it is called here too (numpy's arctan2 differs in the
-last bit for ~0.6 % of arguments).
+form (`columns` of PID, StateFeedback, OpenLoop, Observer and FrictionCompensation, in controllers/), the
+references and the noise tabulated at set-up (rigs.NoiseStream.take: the draws the single run makes, in its
+order), the recording written as columns. Where the single run calls math.atan2 it is called here too
+(numpy's arctan2 differs in the last bit for ~0.6 % of arguments).
 
 Effects on the control half that act sample by sample - a sensor's gain and offset, an actuator's gain, offset
 and limit (engine.ControlLoop.control; a refit rig's `sensor_gain` / `actuator_gain` knobs, the diagnosis' effects)
 - are applied here too, on the members that have them (`Patches`). `ColumnControl.of` gives None where a member
-needs what has no column form - another controller (observer, passivity, fuzzy PD, PI velocity, friction
-compensation), a delay (sensor or command), control jitter - and lockstep then runs each member's own control half.
+needs what has no column form - another controller (passivity, fuzzy PD, PI velocity; a friction compensation has
+one around a controller that has one: the observer's), a delay (sensor or command), control jitter - and lockstep
+then runs each member's own control half.
 """
 from __future__ import annotations
 
@@ -307,7 +308,7 @@ class ColumnControl:
             return False
         if hasattr(form, "fits") and not form.fits([loop.rig for loop in loops]):
             return False
-        return getattr(type(first.controller), "columns", None) is not None
+        return _has_form(first.controller)
 
     @staticmethod
     def of(loops: list, arrays: dict[str, np.ndarray], tip: int) -> "ColumnControl | None":
@@ -345,6 +346,12 @@ class ColumnControl:
     def member_table(self, i: int, n_ticks: int) -> np.ndarray:
         """Member i's recording table (ticks, channels)."""
         return self.table[:n_ticks, :, i]
+
+
+def _has_form(controller) -> bool:
+    """Whether a controller, and the one it wraps (`inner`: a friction compensation's), have a column form."""
+    inner = getattr(controller, "inner", None)
+    return getattr(type(controller), "columns", None) is not None and (inner is None or _has_form(inner))
 
 
 def _padded(values: list[float], n: int) -> list[float]:

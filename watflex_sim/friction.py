@@ -104,6 +104,19 @@ def slope_limited(v: float, positive: Friction, negative: Friction, k_s: float =
     return exponential(v, positive, negative, delta) * (1.0 - math.exp(-abs(v) * k_s))
 
 
+def slope_limited_columns(v: np.ndarray, positive: dict[str, np.ndarray], negative: dict[str, np.ndarray],
+                          k_s: np.ndarray) -> np.ndarray:
+    """`slope_limited` (delta 2) on arrays (B,), each member's parameters in its place (`positive`, `negative`:
+    Friction's fields as arrays): the same operations in the same order and math.exp where it calls that, so
+    each member gets the scalar code's number bit for bit."""
+    up = v > 0
+    p = {name: np.where(up, positive[name], negative[name]) for name in ("alpha0", "alpha1", "alpha2", "v_s")}
+    x = np.abs(v) / p["v_s"]
+    level = p["alpha0"] + p["alpha1"] * np.exp(-(x * x))
+    force = np.where(up, level + p["alpha2"] * v, np.where(v < 0, -level + p["alpha2"] * v, 0.0))
+    return force * (1.0 - np.array([math.exp(u) for u in (-np.abs(v) * k_s).tolist()]))
+
+
 def karnopp(v: float, f_ext: float, dv: float, positive: Friction, negative: Friction,
             delta: float = 2.0) -> float:
     """Karnopp model (thesis 4.3.1), in N m: inside the zero-velocity band |v| < dv (rad/s) the

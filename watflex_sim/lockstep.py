@@ -65,7 +65,8 @@ def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
     out: list = [None] * len(loops)
     for group in groups.values():
         columnar = [i for i in group if ColumnControl.fits([loops[i]])]  # a member whose control half has no
-        for members in (columnar, [i for i in group if i not in columnar]):  # column form runs apart, not the whole group
+        apart = [i for i in group if i not in columnar]  # column form runs apart, not the whole group
+        for members in _alike(loops, columnar) + [apart]:
             if not members:
                 continue
             if len(members) == 1 or not (always or _pays([loops[i] for i in members])):  # the single-run driver
@@ -75,6 +76,20 @@ def simulate_batch(scenarios: list[dict], parameter_names: dict | None = None,
             for i, result in zip(members, _Lockstep([loops[i] for i in members], nthread).run()):
                 out[i] = result
     return out
+
+
+def _alike(loops: list[ControlLoop], members: list[int]) -> list[list[int]]:
+    """`members` (loops of one structure, each with a column form) in classes that share one: a hinge added at the
+    shoulder and one added at the elbow make models of one structure whose sensors read other joints (a diagnosis'
+    backlash and compliance probes, which all ran on per-member control while they shared a batch)."""
+    classes: list[list[int]] = []
+    for i in members:
+        home = next((c for c in classes if ColumnControl.fits([loops[c[0]], loops[i]])), None)
+        if home is None:
+            classes.append([i])
+        else:
+            home.append(i)
+    return classes
 
 
 def _pays(loops: list[ControlLoop]) -> bool:
