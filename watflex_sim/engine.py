@@ -196,7 +196,7 @@ class _References:
 
 SETTLED_KEPT = 64  # models whose settled start `_settle_bearings` keeps (a diagnosis simulates one model for each of
 # its recordings, and most candidate effects - friction laws, sensor and actuator effects - leave the model as it is)
-_SETTLED: OrderedDict[tuple[bytes, float], mujoco.MjData] = OrderedDict()
+_SETTLED: OrderedDict[tuple[bytes, float], tuple[np.ndarray, np.ndarray]] = OrderedDict()  # state, warnings
 _SETTLED_LOCK = threading.Lock()
 
 
@@ -210,7 +210,8 @@ def _model_digest(model: mujoco.MjModel) -> bytes:
 def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float = 0.3) -> None:
     """Let air-bearing slides sink onto the glass, then restore the planar pose at rest. `data` is fresh, at the
     model's keyframe: the result depends on the model alone, so a model settled before (SETTLED_KEPT, by its digest)
-    gets a copy of that whole MjData, bit for bit what settling again gives (~20 ms of physics on a Watflex model)."""
+    gets that one's integration state (the solver's warm start among it) and warning counts, then `mj_forward`: bit
+    for bit what settling again gives (~20 ms of physics on a Watflex model)."""
     slides = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE]
     if not slides:
         return
@@ -219,8 +220,13 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
         settled = _SETTLED.get(key)
         if settled is not None:
             _SETTLED.move_to_end(key)
-            mujoco.mj_copyData(data, model, settled)
-            return
+    if settled is not None:
+        state, warnings = settled
+        mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        for warning, (number, info) in zip(data.warning, warnings):
+            warning.number, warning.lastinfo = int(number), int(info)
+        mujoco.mj_forward(model, data)
+        return
     qpos0 = data.qpos.copy()
     mujoco.mj_step(model, data, nstep=int(round(seconds / model.opt.timestep)))
     keep = [model.jnt_qposadr[j] for j in slides]
@@ -230,10 +236,11 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
     data.qvel[:] = 0
     data.time = 0.0
     mujoco.mj_forward(model, data)
-    kept = mujoco.MjData(model)
-    mujoco.mj_copyData(kept, model, data)
+    state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
+    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+    warnings = np.array([(w.number, w.lastinfo) for w in data.warning], dtype=np.int64)
     with _SETTLED_LOCK:
-        _SETTLED[key] = kept
+        _SETTLED[key] = (state, warnings)
         while len(_SETTLED) > SETTLED_KEPT:
             _SETTLED.popitem(last=False)
 
