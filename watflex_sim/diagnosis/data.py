@@ -28,6 +28,9 @@ BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way (salted with its content)
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
 MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate and diagnose
+UNRESOLVED = 1e-6  # x a channel's spread (std): a noise estimate below this is the file's number format, not the rig's
+# noise (ten significant digits round at ~1e-10 of a value); `prepare` then takes the channel as showing no noise
+NO_NOISE_FLOOR = 1e-3  # x a channel's spread: its noise where neither the rig declares one nor the data show one
 DISCRETISATION_COUNT = 2.0  # a channel judged on its own (worst_channel) and a window (locate.local_null) count what a
 # finer discretisation changes this many times: against twice as fine is a lower bound of our own error (4 x finer:
 # 1.3 x more), and recordings from another implementation of the datasheet carry that one's own
@@ -108,6 +111,17 @@ def measured_noise(values: np.ndarray) -> float:
     return sigma
 
 
+def visible_noise(values: np.ndarray, spread: float) -> float:
+    """measured_noise (the values' unit), or 0 where it is below UNRESOLVED x `spread`: the data resolve no noise.
+    A channel at rest more than half the time (a torque command holding still) has a median second difference at
+    its last printed digit: seed 97's clean two-joint case (watflex-df2f6bbb) re-sampled at 2 ms measured a shoulder
+    command's noise at 6e-9 N m (3e-10 of its spread; 0.019 N m on its two sister recordings), and the refit in
+    noise units weighed that channel 1e9 x the others and could not move (27 x the noise where the 1 ms files'
+    refit reached 0.92 x)."""
+    sigma = measured_noise(values)
+    return sigma if sigma > UNRESOLVED * spread else 0.0
+
+
 def split_blocks(time: np.ndarray, salt: int = 0) -> tuple[np.ndarray, float]:
     """Training mask of one recording and the block length (s): blocks of equal length taken in pairs, one
     block of each pair fitting and the other validating, which one a pseudo-random choice fixed by SPLIT_SEED
@@ -156,7 +170,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
         channels.append(chans)
         scale.append(spread)
-        noise.append({c: max(declared[c], measured_noise(rec.channels[c])) or 1e-3 * spread[c] for c in chans})
+        noise.append({c: max(declared[c], visible_noise(rec.channels[c], spread[c])) or NO_NOISE_FLOOR * spread[c]
+                      for c in chans})
         mask, block = split_blocks(rec.time, int(fingerprint[:8], 16))
         train.append(mask)
         blocks.append(block)
