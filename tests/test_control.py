@@ -46,6 +46,17 @@ def test_staircase_and_step_signals():
     assert (step(0.499), step(0.5)) == (0.0, -0.5)
 
 
+def test_a_signals_table_gives_its_own_values():
+    """`f.table(times)` (engine.ControlLoop tabulates references with it) is the same numbers as f at each time,
+    to the last bit, for every kind that has one."""
+    times = np.arange(0, 10, 1e-3)
+    for spec in ({"kind": "step", "amplitude": 0.5, "time_s": 0.5}, {"kind": "constant", "value": -0.3},
+                 {"kind": "staircase", "levels": [0.1, 0.2, 0.1, 0.0], "times_s": [2, 4, 6, 8]},
+                 {"kind": "samples", "time_s": [0.0, 1.0, 2.5], "values": [1.0, float("nan"), -2.0]}):
+        f = make_signal(spec, sign=-1, scale=1.7)
+        assert np.array_equal(f.table(times), [f(t) for t in times.tolist()]), spec["kind"]
+
+
 def test_triangle_is_rigs_md_sub_breakaway_input():
     """rigs.md §2: amplitude 0.75 alpha0+ and slope 2.4 N m/s, 4 periods, then zero."""
     sc = load_scenario("watflex_elbow_triangle")

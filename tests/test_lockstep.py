@@ -318,10 +318,11 @@ def test_a_settled_start_kept_from_before_gives_the_same_recording():
     assert len(engine._SETTLED) == 2
 
 
-def test_a_generated_model_kept_from_before_compiles_to_the_same_model():
-    """model._generated keeps the spec a model generator built for a segment count and hands out copies: a model
-    loaded from the copy is the one built anew, byte for byte (mj_saveModel), and an edit of one copy (a payload)
-    leaves the next one as it was."""
+def test_a_model_spec_kept_from_before_compiles_to_the_same_model():
+    """model.kept_spec keeps the spec a model generator built for a segment count, a model file parsed or a
+    datasheet's model, and hands out copies: a model loaded from the copy is the one built anew (the first load,
+    the kept specs cleared), byte for byte (mj_saveModel), and an edit of one copy (a payload) leaves the next one
+    as it was."""
     import hashlib
 
     import mujoco
@@ -333,9 +334,9 @@ def test_a_generated_model_kept_from_before_compiles_to_the_same_model():
         mujoco.mj_saveModel(model, None, buffer)
         return hashlib.sha1(buffer.tobytes()).hexdigest()
 
-    for rig, n in (("watflex", 7), ("laser_arm", 4)):
-        models._GENERATED.clear()
+    for rig, n in (("watflex", 7), ("laser_arm", 4), ("laser_arm", 0), ("quanser_2dsfl", 0)):
+        models._SPECS.clear()
         built = digest(models.load_model(rig, n_segments=n))
-        assert len(models._GENERATED) == 1
+        assert len(models._SPECS) == 1
         edited = digest(models.load_model(rig, n_segments=n, payload_kg=0.3))
         assert edited != built and digest(models.load_model(rig, n_segments=n)) == built

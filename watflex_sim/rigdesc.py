@@ -148,14 +148,19 @@ class RigDescription:
     def spec(self) -> mujoco.MjSpec:
         """The nominal model: generated from [datasheet] (model = "datasheet"), the MJCF file, or the
         generator's (build.py) for a bundled model not on disk."""
+        from .model import kept_spec
+
         if self.model == DATASHEET:
             from .datasheet import model_xml
 
-            return mujoco.MjSpec.from_string(model_xml(self.datasheet, self.name))
+            xml = model_xml(self.datasheet, self.name)
+            return kept_spec(("datasheet", xml), lambda: mujoco.MjSpec.from_string(xml))
         path = self.model_path
         if path.is_file():
             try:
-                return mujoco.MjSpec.from_file(str(path))
+                stat = path.stat()  # a file edited since is parsed again
+                return kept_spec(("file", str(path), stat.st_mtime_ns, stat.st_size),
+                                 lambda: mujoco.MjSpec.from_file(str(path)))
             except ValueError as exc:
                 raise ConfigError(f"{path}: not a MuJoCo model ({exc})".replace("\n", " ")) from None
         from .build import BUILDERS

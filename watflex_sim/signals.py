@@ -30,7 +30,12 @@ def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[
     k = sign * scale
     if kind == "step":
         amplitude, t0 = k * _number(spec, "amplitude"), _number(spec, "time_s", 0.0)
-        return lambda t: amplitude if t >= t0 else 0.0
+
+        def step(t: float) -> float:
+            return amplitude if t >= t0 else 0.0
+
+        step.table = lambda ts: np.where(ts >= t0, amplitude, 0.0)
+        return step
     if kind == "staircase":
         levels, times = spec.get("levels"), spec.get("times_s")
         if not isinstance(levels, list) or not isinstance(times, list) or len(levels) != len(times) or not levels:
@@ -82,6 +87,11 @@ def make_signal(spec: dict, sign: float = 1.0, scale: float = 1.0) -> Callable[[
         return held
     if kind == "constant":
         value = k * _number(spec, "value")
-        return lambda t: value
+
+        def constant(t: float) -> float:
+            return value
+
+        constant.table = lambda ts: np.full(np.shape(ts), value, dtype=float)
+        return constant
     raise ConfigError(f"unknown signal kind {kind!r} (known: step, staircase, triangle, constant, samples)")
 
