@@ -382,3 +382,27 @@ def test_a_range_beyond_the_benchmarks_is_drawn_from_and_kept_in_the_truth(tmp_p
     assert 0.2 <= case["parameters"]["v_s"] <= 0.4
     assert truth["ranges"] == {"stribeck_friction.v_s": [0.2, 0.4]}
     assert json.dumps(mb.RANGES, sort_keys=True) == before
+
+
+def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
+    """tools/relog.py: a 0.4 s laser recording at 1 ms (400 samples) re-logged every 2nd sample from 100 s, 10 %
+    of measured cells empty, the motor current dropped, a minimal sidecar: 200 samples 2 ms apart from 100 s, read
+    back as a recording with its references whole, ~10 % (binomial, +-5 sd) of measured cells empty, no current column
+    and none of the simulator's sidecar keys; the same seed gives the same bytes."""
+    from watflex_sim import load_scenario, simulate, write_recording
+
+    spec = importlib.util.spec_from_file_location("relog", ROOT / "tools" / "relog.py")
+    relog = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(relog)
+    rec = simulate(load_scenario("laser_arm_step", ["duration_s=0.4"])).recording
+    write_recording(rec, tmp_path / "src", "step")
+    assert relog.main([str(tmp_path / "src"), str(tmp_path / "a"), "--empty", "0.1", "--drop", "motor_current"]) == 0
+    out = read_recording(tmp_path / "a" / "step.csv")
+    assert out.time.size == 200 and out.time[0] == 100.0 and np.allclose(np.diff(out.time), 2e-3, atol=1e-9)
+    assert "motor_current" not in out.channels and np.isfinite(out.channels["reference"]).all()
+    cells = np.array([out.channels[c] for c in ("hub_angle", "voltage_cmd")])
+    assert abs(np.isnan(cells).mean() - 0.1) < 5 * np.sqrt(0.1 * 0.9 / cells.size)
+    assert not {"scenario", "seed", "control_period_s"} & set(out.meta)
+    relog.main([str(tmp_path / "src"), str(tmp_path / "b"), "--empty", "0.1", "--drop", "motor_current"])
+    assert (tmp_path / "a" / "step.csv").read_bytes() == (tmp_path / "b" / "step.csv").read_bytes()
+    assert relog.main([str(tmp_path / "nothing"), str(tmp_path / "c")]) == 2

@@ -1,0 +1,79 @@
+"""Re-write recordings as another lab's logger might have written them: to try the diagnosis off home ground.
+
+    python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y] [--seed 0]
+
+Every NAME.csv (with NAME.json) in SRC_DIR is written to OUT_DIR keeping one sample in `--every` (a 1 ms recording
+logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` of the measured cells left empty
+(drop-outs; references never), the columns `--drop` left out (sensors the rig does not have), and a minimal sidecar:
+format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
+(scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
+what the diagnosis made of seed-97 cases so re-written.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "notes", "locked_joints")  # sidecar keys
+
+
+def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: float = 0.02,
+          drop: frozenset = frozenset(), seed: int = 0) -> list[Path]:
+    """Write each recording of `src` to `out` as the module says; returns the CSV files written."""
+    files = sorted(src.glob("*.csv"))
+    if not files:
+        raise ValueError(f"{src}: no recordings (*.csv)")
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    written = []
+    for path in files:
+        with path.open(newline="") as f:
+            rows = list(csv.reader(f))
+        header, rows = rows[0], rows[1::every]
+        if header[0] != "time":
+            raise ValueError(f"{path}: the first column is {header[0]!r}, not time")
+        keep = [i for i, name in enumerate(header) if name not in drop]
+        with (out / path.name).open("w", newline="") as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow([header[i] for i in keep])
+            for row in rows:
+                row = [f"{start_s + float(row[0]):.7f}"] + [
+                    "" if not header[c].endswith("reference") and rng.random() < empty else row[c]
+                    for c in range(1, len(row))]
+                writer.writerow([row[i] for i in keep])
+        meta = json.loads(path.with_suffix(".json").read_text())
+        (out / path.name).with_suffix(".json").write_text(json.dumps({k: meta[k] for k in KEPT if k in meta}, indent=1))
+        written.append(out / path.name)
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("src", type=Path, help="folder of NAME.csv + NAME.json recordings (a benchmark case)")
+    parser.add_argument("out", type=Path, help="folder to write the re-logged recordings to (created)")
+    parser.add_argument("--every", type=int, default=2, help="keep one sample in this many (default 2: 1 ms -> 2 ms)")
+    parser.add_argument("--start-s", type=float, default=100.0, help="time of the first sample, s (default 100)")
+    parser.add_argument("--empty", type=float, default=0.02, help="share of measured cells left empty (default 0.02)")
+    parser.add_argument("--drop", default="", help="columns to leave out, comma-separated (e.g. tip_x,tip_y)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the empty cells (default 0)")
+    args = parser.parse_args(argv)
+    if args.every < 1 or not 0 <= args.empty < 1:
+        print("relog: --every must be >= 1 and --empty in [0, 1)", file=sys.stderr)
+        return 2
+    try:
+        written = relog(args.src, args.out, args.every, args.start_s, args.empty,
+                        frozenset(c for c in args.drop.split(",") if c), args.seed)
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"relog: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(written)} recordings to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
