@@ -893,7 +893,8 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
     1.35 x the noise without the backlash, 22.5 x without the offset), the backlash is dropped when the offset and the
     rig's parameters, carried on by the pattern search, are within the noise (1.07 x: NOISE_MARGIN is 1.3), and the model
     so carried on goes on; it stays when the search ends at 1.4 x, or within the noise by the floors the backlash
-    raised but at 1.5 x by those measured again without it, and the floors are then as they were. The offset,
+    raised but at 1.5 x by those measured again without it, and the floors are then as they were; where no finding
+    raised them they are not measured again. The offset,
     beyond COMPASS_REACH x the margin without it, is never tried. A single finding is left to the refit before it."""
     from types import SimpleNamespace
 
@@ -932,6 +933,8 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
         assert settle.spare_a_later_finding(data, Runner(), both, ablated, lambda *a: None, rejected, True, {}) is None
         assert data.noise == "raised" and rejected == []
     carried_ratio["raised"] = 1.07
+    model, _ = settle.spare_a_later_finding(data, Runner(), both, ablated, lambda *a: None, [], False, {})
+    assert [e["effect"] for e in model.effects] == ["actuator_offset"] and data.noise == "raised"  # floors untouched
     assert settle.spare_a_later_finding(data, Runner(), both, [{"noise_ratio": 22.5}, {"noise_ratio": 4.0}],
                                         lambda *a: None, [], True, {}) is None
     assert settle.spare_a_later_finding(data, Runner(), Model(both.effects[:1]), [{"noise_ratio": 1.35}],
@@ -1963,12 +1966,11 @@ def test_the_candidate_fits_simulations_go_together_call_by_call():
     assert sorted(errors) == [(0, "worker failed"), (1, "worker failed")]
 
 
-def test_a_model_simulated_a_moment_ago_is_not_simulated_again(laser_recordings, monkeypatch):
+def test_a_model_simulated_a_moment_ago_is_not_simulated_again(laser_recordings):
     """runner.evaluator: a residual asked for again (the same model, part, unit and fidelity) comes from the runner's
     memo (Runner.remember) without a simulation job, equal to the first to the bit and a copy of it; a model asked
     twice in one call is simulated once; the noise units follow this process' noise as it changes (calibrate_noise);
-    past MEMO_BYTES of others the first is simulated again."""
-    from watflex_sim.diagnosis import runner as runner_module
+    past the memo's limit of others the first is simulated again."""
     from watflex_sim.diagnosis.runner import Runner, evaluator
 
     data = prepare(laser_recordings, ["pos", "neg"])
@@ -1987,7 +1989,7 @@ def test_a_model_simulated_a_moment_ago_is_not_simulated_again(laser_recordings,
         before = in_noise([payload])[0]
         runner.data.noise[:] = [{c: 2 * v for c, v in n.items()} for n in data.noise]
         assert np.allclose(in_noise([payload])[0], before / 2)
-        monkeypatch.setattr(runner_module, "MEMO_BYTES", 8 * first.nbytes)  # eight residuals
+        runner.memo.limit = 8 * first.nbytes  # eight residuals, where MEMO_BYTES keeps hundreds
         evaluate([Model(parameters={"beam_EI": 1 + k * 1e-4}) for k in range(8)])
         jobs = runner.jobs
         evaluate([payload])

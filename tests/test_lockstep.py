@@ -318,6 +318,27 @@ def test_a_settled_start_kept_from_before_gives_the_same_recording():
     assert len(engine._SETTLED) == 2
 
 
+def test_latest_keeps_the_most_recently_used_within_its_limit():
+    """latest.Latest (the cache of model specs, settled starts and residuals): with a limit of 10 bytes, a 4-byte and a
+    6-byte value fit; a third of 4 bytes drops the least recently used - the 6-byte one once the 4-byte one was asked
+    for again - and a value larger than the limit is not kept at all; None is a value, told from a missing key."""
+    from watflex_sim.latest import Latest
+
+    kept = Latest(10, lambda v: 0 if v is None else v.nbytes)
+    kept.put("a", np.zeros(4, np.uint8))
+    kept.put("b", np.zeros(6, np.uint8))
+    assert len(kept) == 2 and kept.get("a") is not None  # "a" now the most recently used
+    kept.put("c", np.zeros(4, np.uint8))
+    assert "b" not in kept and "a" in kept and "c" in kept
+    kept.put("d", None)
+    assert "d" in kept and kept.get("d", "missing") is None and kept.get("e", "missing") == "missing"
+    kept.put("huge", np.zeros(11, np.uint8))
+    assert "huge" not in kept and len(kept) == 0  # everything went to make room, and it still did not fit
+    kept.put("a", np.zeros(4, np.uint8))
+    kept.put("a", np.zeros(8, np.uint8))  # replaced: its old size no longer counts
+    assert len(kept) == 1 and kept.get("a").nbytes == 8
+
+
 def test_a_model_spec_kept_from_before_compiles_to_the_same_model():
     """model.kept_spec keeps the spec a model generator built for a segment count, a model file parsed or a
     datasheet's model, and hands out copies: a model loaded from the copy is the one built anew (the first load,

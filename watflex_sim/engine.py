@@ -6,9 +6,7 @@ import hashlib
 import inspect
 import logging
 import math
-import threading
 import time as wallclock
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Callable
 
@@ -18,6 +16,7 @@ import numpy as np
 from . import __version__
 from .effects import Patch, apply_effects, apply_parameters
 from .joint_friction import FrictionCallback, patched, scenario_frictions
+from .latest import Latest
 from .model import ConfigError, load_model
 from .params import CONTROL_PERIOD
 from .recording import FORMAT, Recording
@@ -196,8 +195,7 @@ class _References:
 
 SETTLED_KEPT = 64  # models whose settled start `_settle_bearings` keeps (a diagnosis simulates one model for each of
 # its recordings, and most candidate effects - friction laws, sensor and actuator effects - leave the model as it is)
-_SETTLED: OrderedDict[tuple[bytes, float], tuple[np.ndarray, np.ndarray]] = OrderedDict()  # state, warnings
-_SETTLED_LOCK = threading.Lock()
+_SETTLED = Latest(SETTLED_KEPT)  # (model digest, s) -> (state, warnings)
 
 
 def _model_digest(model: mujoco.MjModel) -> bytes:
@@ -216,10 +214,7 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
     if not slides:
         return
     key = (_model_digest(model), seconds)
-    with _SETTLED_LOCK:
-        settled = _SETTLED.get(key)
-        if settled is not None:
-            _SETTLED.move_to_end(key)
+    settled = _SETTLED.get(key)
     if settled is not None:
         state, warnings = settled
         mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
@@ -239,10 +234,7 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
     state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
     mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
     warnings = np.array([(w.number, w.lastinfo) for w in data.warning], dtype=np.int64)
-    with _SETTLED_LOCK:
-        _SETTLED[key] = (state, warnings)
-        while len(_SETTLED) > SETTLED_KEPT:
-            _SETTLED.popitem(last=False)
+    _SETTLED.put(key, (state, warnings))
 
 
 class ControlLoop:

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -11,6 +9,7 @@ import mujoco
 import numpy as np
 
 from .build import BUILDERS, make_single_link
+from .latest import Latest
 from .params import GRAVITY
 
 _PACKAGE = Path(__file__).resolve().parent
@@ -46,22 +45,18 @@ def rig_params(rig: str):
 
 
 SPECS_KEPT = 16  # model specs (`kept_spec`) kept: a diagnosis simulates a few discretisations of one rig
-_SPECS: OrderedDict[tuple, mujoco.MjSpec] = OrderedDict()
-_SPECS_LOCK = threading.Lock()
+_SPECS = Latest(SPECS_KEPT)
 
 
 def kept_spec(key: tuple, build: Callable[[], mujoco.MjSpec]) -> mujoco.MjSpec:
     """build() as a fresh spec: a copy of the one built before under `key` (the SPECS_KEPT latest). A Watflex
     generator's build costs ~15 ms and a model file's parse ~0.6 ms, a copy 0.01-0.1 ms, and a diagnosis or a sweep
     sets up thousands of simulations of one model."""
-    with _SPECS_LOCK:
-        spec = _SPECS.get(key)
-        if spec is None:
-            spec = _SPECS[key] = build()
-            while len(_SPECS) > SPECS_KEPT:
-                _SPECS.popitem(last=False)
-        _SPECS.move_to_end(key)
-        return spec.copy()
+    spec = _SPECS.get(key)
+    if spec is None:
+        spec = build()
+        _SPECS.put(key, spec)
+    return spec.copy()
 
 
 def load_model(

@@ -17,13 +17,13 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import threading
-from collections import OrderedDict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 
 from ..engine import SimulationError
 from ..interrupts import stop_pool, worker_init
+from ..latest import Latest
 from ..recording import Recording
 from ..resim import finer_discretisation, resimulate_many, scenario_from_recording
 from .data import Data, Model, in_part, residual_vector
@@ -115,8 +115,7 @@ class Runner:
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
         self.fidelity = 1.0  # every simulation this many times as fine as the rig's model (refit.choose_fidelity)
         self.workers = workers if workers > 1 else 1
-        self.memo: OrderedDict = OrderedDict()  # the latest residuals `evaluator` computed (MEMO_BYTES), by model and part
-        self.memo_bytes = 0
+        self.memo = Latest(MEMO_BYTES, lambda residual: 0 if residual is None else residual.nbytes)  # see remember
         self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C
                      if workers > 1 else None)
 
@@ -124,11 +123,7 @@ class Runner:
         """Keep a model's residual (`evaluator`'s key: the model, part, unit and fidelity; None: it diverged) among the
         latest MEMO_BYTES: a fit asks again for a model it has just simulated (a carried-on fit's start, a scan's given
         values, a step search's rounded start), ~4 % of a diagnosis' simulations and most of them a call of their own."""
-        self.memo[key] = residual
-        self.memo_bytes += 0 if residual is None else residual.nbytes
-        while self.memo_bytes > MEMO_BYTES:
-            old = self.memo.popitem(last=False)[1]
-            self.memo_bytes -= 0 if old is None else old.nbytes
+        self.memo.put(key, residual)
 
     def map(self, fn, jobs: list) -> list:
         """fn over jobs, in order; reports progress as jobs finish."""
@@ -212,7 +207,7 @@ def evaluator(runner: Runner | None, part: str = "train", unit: str = "spread", 
         factor = finer * runner.fidelity
         here = () if runner.pool else (id(held()), repr(held().noise) if unit == "noise" else "")  # this process' data
         keys = [(repr(m.effects), repr(sorted(m.parameters.items())), part, unit, factor, *here) for m in models]
-        known = {key: runner.memo[key] for key in keys if key in runner.memo}
+        known = {key: runner.memo.get(key) for key in keys if key in runner.memo}
         todo = list({key: m for key, m in zip(keys, models) if key not in known}.items())
         pieces = runner.lockstep(_pieces, [(m, i, part, unit, factor) for _, m in todo for i in range(n)]) if todo else []
         for k, (key, _) in enumerate(todo):

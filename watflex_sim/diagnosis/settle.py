@@ -115,18 +115,22 @@ def spare_a_later_finding(data: Data, runner: Runner, model: Model, ablated: lis
         say("elimination", f"would the rest explain the data without {effect['effect']} at {effect['where']} "
             f"(validation {ablated[i]['noise_ratio']:.2f} x the noise without it), carried on by the pattern search?")
         carried, sims = pattern_polish(data, runner, reduced, sims, say)
-        before = {name: deepcopy(getattr(data, name)) for name in FLOORS}
-        if raised and within_noise(fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")):
-            floors_after_dropping(data, runner, carried, sims, nominal_floors, say)
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
-        if within_noise(train, held):
-            say("elimination", f"dropping {effect['effect']} at {effect['where']}: without it the rest, carried on, "
-                f"are within the noise (training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x)")
-            rejected.append({"effect": effect["effect"], "where": effect["where"],
-                             "parameters": {k: v for k, v in effect.items() if k not in ("effect", "where")},
-                             "why": "the other findings and the rig's parameters, carried on by the pattern search within "
-                                    "their tolerances, explain the data within the noise without it"})
-            return carried, sims
-        for name, floor in before.items():  # the floors it was judged by, as they were
-            setattr(data, name, floor)
+        if not within_noise(train, held):
+            continue
+        if raised:  # judged again by the floors measured without it; put back if it fails them
+            before = {name: deepcopy(getattr(data, name)) for name in FLOORS}
+            floors_after_dropping(data, runner, carried, sims, nominal_floors, say)
+            train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
+            if not within_noise(train, held):
+                for name, floor in before.items():
+                    setattr(data, name, floor)
+                continue
+        say("elimination", f"dropping {effect['effect']} at {effect['where']}: without it the rest, carried on, "
+            f"are within the noise (training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x)")
+        rejected.append({"effect": effect["effect"], "where": effect["where"],
+                         "parameters": {k: v for k, v in effect.items() if k not in ("effect", "where")},
+                         "why": "the other findings and the rig's parameters, carried on by the pattern search within "
+                                "their tolerances, explain the data within the noise without it"})
+        return carried, sims
     return None
