@@ -104,6 +104,36 @@ def test_a_channel_whose_noise_the_data_do_not_resolve_gets_the_no_noise_floor(l
     assert measured_noise(held) < 1e-9 * np.std(held)  # what the floor replaces
 
 
+def test_time_stamps_a_logger_jittered_are_compared_at_the_loops_ticks(laser_recordings, monkeypatch):
+    """data.on_ticks in prepare: a laser step logged at 1 ms with every stamp off by up to 0.3 ms (uniform, the values
+    those of the ticks: a logger stamping when it writes) is compared at the ticks: its times are whole ms from the
+    first (to 1e-9 s), the split's description says the stamps moved, and the nominal model's residual is the one of
+    the file as made to 1e-9 of its spread; compared at the stamps, as before, it is off by more than 1 % of the
+    spread rms (0.026: the noise leaves 0.030). A log on the ticks, one at 0.7 ms (not the loop's) and a clock that drifts a period and more against the
+    loop (0.99 ms: two stamps on one tick) are left as they are."""
+    from watflex_sim.diagnosis import data as data_module
+    from watflex_sim.resim import resimulate
+
+    rec = laser_recordings[0]
+    stamps = 100.0 + rec.time + np.random.default_rng(0).uniform(-3e-4, 3e-4, rec.time.size)
+    jittered = Recording(stamps, rec.channels, rec.meta)
+    made, moved = prepare([rec], ["a.csv"]), prepare([jittered], ["a.csv"])
+    t = moved.recordings[0].time - moved.recordings[0].time[0]
+    assert np.abs(t - 1e-3 * np.round(t / 1e-3)).max() < 1e-9 and "clock jitter" in moved.how
+    assert "clock jitter" not in made.how and made.recordings[0] is rec
+    residual = {}
+    for name, data in (("made", made), ("moved", moved)):
+        residual[name] = data_module.residual_vector(data, [resimulate(data.recordings[0])], "all", stride=1)
+    assert np.abs(residual["moved"] - residual["made"]).max() < 1e-9
+    monkeypatch.setattr(data_module, "on_ticks", lambda r, period: (r, 0.0))
+    at_stamps = prepare([jittered], ["a.csv"])
+    off = data_module.residual_vector(at_stamps, [resimulate(jittered)], "all", stride=1) - residual["made"]
+    assert np.sqrt(np.mean(off**2)) > 0.01
+    for spacing in (0.7e-3, 0.99e-3):
+        other = Recording(np.arange(rec.time.size) * spacing, rec.channels, rec.meta)
+        assert data_module.on_ticks(other, 1e-3) == (other, 0.0)
+
+
 def test_intervals_cover_a_linear_fit_as_often_as_they_say():
     """y = a t + white noise, fitted by least squares: the 95 % interval from the Jacobian covers
     the true a in 95 % +- 4 % of 400 seeds (binomial: 2 sd = 2.2 %)."""

@@ -388,7 +388,8 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     """tools/relog.py: a 0.4 s laser recording at 1 ms (400 samples) re-logged every 2nd sample from 100 s, 10 %
     of measured cells empty, the motor current dropped, a minimal sidecar: 200 samples 2 ms apart from 100 s, read
     back as a recording with its references whole, ~10 % (binomial, +-5 sd) of measured cells empty, no current column
-    and none of the simulator's sidecar keys; the same seed gives the same bytes."""
+    and none of the simulator's sidecar keys; the same seed gives the same bytes. With stamps jittered by up to 0.2 ms and
+    written in ms (the sidecar says so), the reader gives times within 0.2 ms of the ticks and the values unmoved."""
     from watflex_sim import load_scenario, simulate, write_recording
 
     spec = importlib.util.spec_from_file_location("relog", ROOT / "tools" / "relog.py")
@@ -406,3 +407,10 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     relog.main([str(tmp_path / "src"), str(tmp_path / "b"), "--empty", "0.1", "--drop", "motor_current"])
     assert (tmp_path / "a" / "step.csv").read_bytes() == (tmp_path / "b" / "step.csv").read_bytes()
     assert relog.main([str(tmp_path / "nothing"), str(tmp_path / "c")]) == 2
+    assert relog.main([str(tmp_path / "src"), str(tmp_path / "d"), "--every", "1", "--jitter-s", "2e-4",
+                       "--time-unit", "ms"]) == 0  # stamps off by up to 0.2 ms, written in ms
+    out = read_recording(tmp_path / "d" / "step.csv")
+    off = out.time - (100.0 + rec.time)
+    assert out.time.size == 400 and np.abs(off).max() <= 2e-4 + 1e-9 and np.abs(off).max() > 1e-4
+    written, moved = read_recording(tmp_path / "src" / "step.csv").channels["hub_angle"], out.channels["hub_angle"]
+    assert np.array_equal(moved[np.isfinite(moved)], written[np.isfinite(moved)])  # the values not moved

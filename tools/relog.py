@@ -1,10 +1,13 @@
 """Re-write recordings as another lab's logger might have written them: to try the diagnosis off home ground.
 
-    python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y] [--seed 0]
+    python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y]
+                          [--jitter-s 0] [--time-unit s] [--seed 0]
 
 Every NAME.csv (with NAME.json) in SRC_DIR is written to OUT_DIR keeping one sample in `--every` (a 1 ms recording
 logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` of the measured cells left empty
-(drop-outs; references never), the columns `--drop` left out (sensors the rig does not have), and a minimal sidecar:
+(drop-outs; references never), the columns `--drop` left out (sensors the rig does not have), each time stamp off by
+up to `--jitter-s` s (uniform; the values stay those of the sample: a logger that stamps when it writes), time in
+`--time-unit` (s or ms; ms is declared in the sidecar as recordings.md asks), and a minimal sidecar:
 format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
 (scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
 what the diagnosis made of seed-97 cases so re-written.
@@ -23,13 +26,14 @@ KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "note
 
 
 def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: float = 0.02,
-          drop: frozenset = frozenset(), seed: int = 0) -> list[Path]:
+          drop: frozenset = frozenset(), seed: int = 0, jitter_s: float = 0.0, time_unit: str = "s") -> list[Path]:
     """Write each recording of `src` to `out` as the module says; returns the CSV files written."""
     files = sorted(src.glob("*.csv"))
     if not files:
         raise ValueError(f"{src}: no recordings (*.csv)")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
+    scale = {"s": 1.0, "ms": 1e3}[time_unit]
     written = []
     for path in files:
         with path.open(newline="") as f:
@@ -42,12 +46,14 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
             writer = csv.writer(f, lineterminator="\n")
             writer.writerow([header[i] for i in keep])
             for row in rows:
-                row = [f"{start_s + float(row[0]):.7f}"] + [
+                stamp = start_s + float(row[0]) + (jitter_s * rng.uniform(-1, 1) if jitter_s else 0.0)  # s
+                row = [f"{scale * stamp:.{7 - round(np.log10(scale))}f}"] + [
                     "" if not header[c].endswith("reference") and rng.random() < empty else row[c]
                     for c in range(1, len(row))]
                 writer.writerow([row[i] for i in keep])
         meta = json.loads(path.with_suffix(".json").read_text())
-        (out / path.name).with_suffix(".json").write_text(json.dumps({k: meta[k] for k in KEPT if k in meta}, indent=1))
+        meta = {k: meta[k] for k in KEPT if k in meta} | ({"time_unit": "ms"} if time_unit == "ms" else {})
+        (out / path.name).with_suffix(".json").write_text(json.dumps(meta, indent=1))
         written.append(out / path.name)
     return written
 
@@ -60,14 +66,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--start-s", type=float, default=100.0, help="time of the first sample, s (default 100)")
     parser.add_argument("--empty", type=float, default=0.02, help="share of measured cells left empty (default 0.02)")
     parser.add_argument("--drop", default="", help="columns to leave out, comma-separated (e.g. tip_x,tip_y)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the empty cells (default 0)")
+    parser.add_argument("--jitter-s", type=float, default=0.0,
+                        help="each time stamp off by up to this, s, uniform (default 0; the values are not moved)")
+    parser.add_argument("--time-unit", choices=("s", "ms"), default="s", help="unit of the time column (default s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the empty cells and the jitter (default 0)")
     args = parser.parse_args(argv)
-    if args.every < 1 or not 0 <= args.empty < 1:
-        print("relog: --every must be >= 1 and --empty in [0, 1)", file=sys.stderr)
+    if args.every < 1 or not 0 <= args.empty < 1 or args.jitter_s < 0:
+        print("relog: --every must be >= 1, --empty in [0, 1) and --jitter-s >= 0", file=sys.stderr)
         return 2
     try:
         written = relog(args.src, args.out, args.every, args.start_s, args.empty,
-                        frozenset(c for c in args.drop.split(",") if c), args.seed)
+                        frozenset(c for c in args.drop.split(",") if c), args.seed, args.jitter_s, args.time_unit)
     except (OSError, ValueError, KeyError) as exc:
         print(f"relog: {exc}", file=sys.stderr)
         return 2

@@ -31,6 +31,7 @@ MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate a
 UNRESOLVED = 1e-6  # x a channel's spread (std): a noise estimate below this is the file's number format, not the rig's
 # noise (ten significant digits round at ~1e-10 of a value); `prepare` then takes the channel as showing no noise
 NO_NOISE_FLOOR = 1e-3  # x a channel's spread: its noise where neither the rig declares one nor the data show one
+TICK_JITTER = 1e-3  # x the control period: time stamps further than this off the loop's ticks are moved onto them (on_ticks)
 DISCRETISATION_COUNT = 2.0  # a channel judged on its own (worst_channel) and a window (locate.local_null) count what a
 # finer discretisation changes this many times: against twice as fine is a lower bound of our own error (4 x finer:
 # 1.3 x more), and recordings from another implementation of the datasheet carry that one's own
@@ -122,6 +123,27 @@ def visible_noise(values: np.ndarray, spread: float) -> float:
     return sigma if sigma > UNRESOLVED * spread else 0.0
 
 
+def on_ticks(rec: Recording, period: float) -> tuple[Recording, float]:
+    """`rec` with its time stamps moved onto the ticks of its control loop (`period`, s) and the farthest move (s),
+    or `rec` as it is and 0. The loop samples its sensors on its ticks (and the simulation gives its channels there),
+    so a stamp off its tick by less than half a period is a logger's clock jitter, not a sample taken between
+    ticks: compared at the stamp, the simulation was interpolated to a time the values were not taken at. Only
+    where the median spacing is a whole number of periods (the loop's own log, every n-th tick), some stamp is
+    more than TICK_JITTER periods off the grid (the grid's phase: the stamps' circular mean) and no two stamps
+    fall on one tick (a clock that drifts a period against the loop is left alone). Seed 94's clean laser case with
+    stamps jittered by up to 0.25 ms (tools/relog.py) took a tip-sensor delay for a finding."""
+    t = rec.time - rec.time[0]
+    spacing = float(np.median(np.diff(t))) / period
+    if round(spacing) < 1 or abs(spacing - round(spacing)) > 0.1:  # the median of jittered spacings strays ~2 %
+        return rec, 0.0
+    phase = float(np.angle(np.mean(np.exp(2j * np.pi * t / period)))) / (2 * np.pi) * period  # s
+    ticks = np.round((t - phase) / period)
+    moved = float(np.max(np.abs(t - phase - ticks * period)))
+    if moved <= TICK_JITTER * period or np.any(np.diff(ticks) <= 0):
+        return rec, 0.0
+    return Recording(rec.time[0] + phase + ticks * period, rec.channels, rec.meta), moved
+
+
 def split_blocks(time: np.ndarray, salt: int = 0) -> tuple[np.ndarray, float]:
     """Training mask of one recording and the block length (s): blocks of equal length taken in pairs, one
     block of each pair fitting and the other validating, which one a pseudo-random choice fixed by SPLIT_SEED
@@ -156,6 +178,8 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     order = sorted(range(len(recordings)), key=lambda i: (names[i], prints[i]))
     recordings, names, prints = [recordings[i] for i in order], [names[i] for i in order], [prints[i] for i in order]
     outputs = set(rig.of_kind("measured"))
+    moved = [on_ticks(r, float(r.meta.get("control_period_s") or rig.control_period_s)) for r in recordings]
+    recordings = [r for r, _ in moved]
     channels, scale, noise, train, blocks = [], [], [], [], []
     for rec, name, fingerprint in zip(recordings, names, prints):
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
@@ -179,6 +203,9 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     how = (f"every recording in blocks of {min(blocks):.2g}-{max(blocks):.2g} s, half of them (a pseudo-random "
            f"choice fixed by its content) fitted, the other half validate" + (f" (and all after {FIT_SECONDS:g} s)" if longer else "")
            + "; the same regimes in both, whatever the file order")
+    jittered = [f"{name} by up to {m * 1e3:.2g} ms" for name, (_, m) in zip(names, moved) if m]
+    if jittered:
+        how += ("; time stamps moved onto the control loop's ticks (a logger's clock jitter): " + ", ".join(jittered))
     return Data(recordings, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise])
 
 
