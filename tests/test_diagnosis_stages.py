@@ -109,8 +109,9 @@ def test_time_stamps_a_logger_jittered_are_compared_at_the_loops_ticks(laser_rec
     those of the ticks: a logger stamping when it writes) is compared at the ticks: its times are whole ms from the
     first (to 1e-9 s), the split's description says the stamps moved, and the nominal model's residual is the one of
     the file as made to 1e-9 of its spread; compared at the stamps, as before, it is off by more than 1 % of the
-    spread rms (0.026: the noise leaves 0.030). A log on the ticks, one at 0.7 ms (not the loop's) and a clock that drifts a period and more against the
-    loop (0.99 ms: two stamps on one tick) are left as they are."""
+    spread rms (0.026: the noise leaves 0.030). A log on the ticks, one at 0.7 ms (not the loop's), a clock that
+    drifts a period and more against the loop (0.99 ms: two stamps on one tick) and samples stamped exactly at times
+    unrelated to the loop (spacings uniform on 2.6-3.4 ms: a variable-step simulator's output) are left as they are."""
     from watflex_sim.diagnosis import data as data_module
     from watflex_sim.resim import resimulate
 
@@ -132,6 +133,8 @@ def test_time_stamps_a_logger_jittered_are_compared_at_the_loops_ticks(laser_rec
     for spacing in (0.7e-3, 0.99e-3):
         other = Recording(np.arange(rec.time.size) * spacing, rec.channels, rec.meta)
         assert data_module.on_ticks(other, 1e-3) == (other, 0.0)
+    anywhere = np.cumsum(np.random.default_rng(1).uniform(2.6e-3, 3.4e-3, rec.time.size))  # exact, off any grid
+    assert data_module.on_ticks(Recording(anywhere, rec.channels, rec.meta), 1e-3)[1] == 0.0
 
 
 def test_intervals_cover_a_linear_fit_as_often_as_they_say():

@@ -32,6 +32,8 @@ UNRESOLVED = 1e-6  # x a channel's spread (std): a noise estimate below this is 
 # noise (ten significant digits round at ~1e-10 of a value); `prepare` then takes the channel as showing no noise
 NO_NOISE_FLOOR = 1e-3  # x a channel's spread: its noise where neither the rig declares one nor the data show one
 TICK_JITTER = 1e-3  # x the control period: time stamps further than this off the loop's ticks are moved onto them (on_ticks)
+ON_GRID = 0.2  # the least mean resultant length of the stamps' phases on the loop's period for a jittered grid (on_ticks):
+# uniform jitter up to +-0.4 of a period has 0.23, up to +-0.25 0.64; stamps unrelated to the loop ~1 / sqrt(samples)
 DISCRETISATION_COUNT = 2.0  # a channel judged on its own (worst_channel) and a window (locate.local_null) count what a
 # finer discretisation changes this many times: against twice as fine is a lower bound of our own error (4 x finer:
 # 1.3 x more), and recordings from another implementation of the datasheet carry that one's own
@@ -128,15 +130,20 @@ def on_ticks(rec: Recording, period: float) -> tuple[Recording, float]:
     or `rec` as it is and 0. The loop samples its sensors on its ticks (and the simulation gives its channels there),
     so a stamp off its tick by less than half a period is a logger's clock jitter, not a sample taken between
     ticks: compared at the stamp, the simulation was interpolated to a time the values were not taken at. Only
-    where the median spacing is a whole number of periods (the loop's own log, every n-th tick), some stamp is
-    more than TICK_JITTER periods off the grid (the grid's phase: the stamps' circular mean) and no two stamps
-    fall on one tick (a clock that drifts a period against the loop is left alone). Seed 94's clean laser case with
+    where the median spacing is a whole number of periods (the loop's own log, every n-th tick), the stamps' phases
+    on the period cluster (mean resultant length at least ON_GRID: samples taken between ticks and stamped exactly,
+    a variable-step simulator's output, have none and are left at their stamps), some stamp is more than
+    TICK_JITTER periods off the grid (the grid's phase: the stamps' circular mean) and no two stamps fall on one
+    tick (a clock that drifts a period against the loop is left alone). Seed 94's clean laser case with
     stamps jittered by up to 0.25 ms (tools/relog.py) took a tip-sensor delay for a finding."""
     t = rec.time - rec.time[0]
     spacing = float(np.median(np.diff(t))) / period
     if round(spacing) < 1 or abs(spacing - round(spacing)) > 0.1:  # the median of jittered spacings strays ~2 %
         return rec, 0.0
-    phase = float(np.angle(np.mean(np.exp(2j * np.pi * t / period)))) / (2 * np.pi) * period  # s
+    mean = np.mean(np.exp(2j * np.pi * t / period))
+    if abs(mean) < ON_GRID:
+        return rec, 0.0
+    phase = float(np.angle(mean)) / (2 * np.pi) * period  # s
     ticks = np.round((t - phase) / period)
     moved = float(np.max(np.abs(t - phase - ticks * period)))
     if moved <= TICK_JITTER * period or np.any(np.diff(ticks) <= 0):
