@@ -134,8 +134,9 @@ def on_ticks(rec: Recording, period: float) -> tuple[Recording, float]:
     on the period cluster (mean resultant length at least ON_GRID: samples taken between ticks and stamped exactly,
     a variable-step simulator's output, have none and are left at their stamps), some stamp is more than
     TICK_JITTER periods off the grid (the grid's phase: the stamps' circular mean) and no two stamps fall on one
-    tick (a clock that drifts a period against the loop is left alone). Seed 94's clean laser case with
-    stamps jittered by up to 0.25 ms (tools/relog.py) took a tip-sensor delay for a finding."""
+    tick (a clock that drifts a period against the loop is left alone). Seed 94's clean laser and single-link
+    Watflex cases with stamps jittered by up to 0.25 ms (tools/relog.py) came out `unexplained` (`nothing_missing`
+    now; docs/diagnosis.md, "Time stamps a logger jittered")."""
     t = rec.time - rec.time[0]
     spacing = float(np.median(np.diff(t))) / period
     if round(spacing) < 1 or abs(spacing - round(spacing)) > 0.1:  # the median of jittered spacings strays ~2 %
