@@ -272,8 +272,7 @@ class ControlLoop:
         )
         for edit in patch.model_edits:
             edit(self.model)
-        # s: the scenario's (a recording's sidecar) sample period, else the rig's
-        self.period = period = scenario.get("control_period_s") or description.control_period_s
+        self.period = period = description.period_of(scenario)  # s
         self.n_sub = substeps(period, self.model.opt.timestep)
         self.jitter = description.control_jitter_s  # s
         self.data = mujoco.MjData(self.model)

@@ -25,7 +25,7 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
         raise ConfigError(f"a recording of rig {meta.get('rig')!r} re-simulated on rig {description.name!r}")
     scenario = copy.deepcopy(DEFAULTS)
     time = rec.time - rec.time[0]
-    period = float(meta.get("control_period_s") or description.control_period_s)  # s: the sidecar's, else the rig's
+    period = description.period_of(meta)  # s
     scenario.update(
         rig=description.name, experiment=meta.get("experiment", "recording"), name=meta.get("experiment", "recording"),
         duration_s=float(round(time[-1] / period) + 1) * period,
@@ -118,7 +118,7 @@ def finer_discretisation(rig: RigDescription, scenario: dict, factor: float) -> 
     if segments and max(2, round(factor * segments)) != segments:
         out["n_segments"] = max(2, round(factor * segments))
     step = (scenario["timestep"] or model_timestep(rig)) / factor  # s: the scenario's, else the model's
-    ticks = (scenario.get("control_period_s") or rig.control_period_s) / step  # physics steps per control period
+    ticks = rig.period_of(scenario) / step  # physics steps per control period
     if factor > 1 or (round(ticks) >= 1 and abs(ticks - round(ticks)) < 1e-9):
         out["timestep"] = step
     return out

@@ -80,6 +80,10 @@ class RigDescription:
     def units(self) -> dict[str, str]:
         return {c: spec["unit"] for c, spec in self.channels.items()}
 
+    def period_of(self, settings: dict) -> float:
+        """s: the control period a scenario or a recording's sidecar sets (its `control_period_s`), else the rig's."""
+        return float(settings.get("control_period_s") or self.control_period_s)
+
     def of_kind(self, kind: str) -> list[str]:
         return [c for c, spec in self.channels.items() if spec["kind"] == kind]
 
