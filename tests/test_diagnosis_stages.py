@@ -88,6 +88,58 @@ def test_noise_is_measured_from_the_data():
     assert measured_noise(np.round(0.1 * t / 1e-3) * 1e-3) >= 1e-3 / math.sqrt(12) * 0.999
 
 
+def _low_passed_noise(n: int, a: float, seed: int) -> np.ndarray:
+    """Unit-rms noise through a first-order low-pass: x[k] = a x[k-1] + sqrt(1 - a^2) e[k] (autocorrelation a^lag)."""
+    from scipy.signal import lfilter
+
+    e = np.random.default_rng(seed).standard_normal(n)
+    return lfilter([math.sqrt(1 - a * a)], [1.0, -a], e)
+
+
+def test_noise_a_sensors_filter_correlated_is_measured_on_the_residual():
+    """data.coloured_noise: unit-rms noise through a first-order low-pass at 100 Hz sampled at 1 kHz (a = 0.53):
+    the lag-1 estimate reads sqrt(1 - 4a/3 + a^2/3) = 0.62 of it (its second differences' variance, within 5 %),
+    coloured_noise its rms (within 5 %), also at 2 ms; white noise, a smooth 5 Hz misfit on it and steady lines from
+    50 to 300 Hz (the frequencies whose second differences are alike at 4 and 8 ms, 83 and 167 Hz, among them) add
+    nothing; nor does a low-pass at 40 Hz (a = 0.78), which has not levelled off by NOISE_LAG_S."""
+    from watflex_sim.diagnosis.data import coloured_noise
+
+    t = np.arange(0.0, 6.0, 1e-3)  # s
+    a = math.exp(-2 * math.pi * 100.0 * 1e-3)
+    noise = _low_passed_noise(t.size, a, 0)
+    assert measured_noise(noise) == pytest.approx(math.sqrt(1 - 4 * a / 3 + a * a / 3), rel=0.05)
+    assert coloured_noise(noise, 1e-3) == pytest.approx(1.0, rel=0.05)
+    assert coloured_noise(noise[::2], 2e-3) == pytest.approx(1.0, rel=0.05)
+    white = np.random.default_rng(1).standard_normal(t.size)
+    assert coloured_noise(white, 1e-3) == 0.0
+    assert coloured_noise(0.01 * white + 0.1 * np.sin(2 * np.pi * 5.0 * t), 1e-3) == 0.0
+    for hz in (50.0, 83.0, 100.0, 125.0, 167.0, 200.0, 300.0):
+        assert coloured_noise(0.5 * white + np.sin(2 * np.pi * hz * t), 1e-3) == 0.0, hz
+    assert coloured_noise(_low_passed_noise(t.size, math.exp(-2 * math.pi * 40.0 * 1e-3), 2), 1e-3) == 0.0
+
+
+def test_the_noise_floor_of_a_measured_channel_is_raised_to_its_coloured_noise():
+    """data.add_coloured_noise: a 3 s laser step whose tip sensor and voltage command carry low-pass noise of 0.02 V
+    rms (100 Hz, as above) besides the rig's: against the same step without it, the tip sensor's noise and sensor
+    noise are raised to that (within 10 %: 3,000 samples' estimate), the command's are left (a command's noise is
+    the closed-loop part's, add_closed_loop_noise) and so is the motor current, whose residual is nil."""
+    from watflex_sim.diagnosis.data import add_coloured_noise
+
+    rec = simulate(load_scenario("laser_arm_step", ["duration_s=3", "seed=0"])).recording
+    extra = 0.02 * _low_passed_noise(rec.time.size, math.exp(-2 * math.pi * 100.0 * 1e-3), 3)  # V
+    noisy = Recording(rec.time, {**rec.channels, "tip_sensor": rec.channels["tip_sensor"] + extra,
+                                 "voltage_cmd": rec.channels["voltage_cmd"] + extra}, rec.meta)
+    data = prepare([noisy], ["step.csv"])
+    before = [dict(n) for n in data.noise]
+    raised = add_coloured_noise(data, [rec])
+    assert raised and raised[0].startswith("step.csv: tip_sensor x")
+    assert data.sensor_noise[0]["tip_sensor"] == pytest.approx(0.02, rel=0.1)
+    assert data.sensor_noise[0]["tip_sensor"] > before[0]["tip_sensor"]
+    assert data.noise[0]["tip_sensor"] == data.sensor_noise[0]["tip_sensor"]
+    assert data.noise[0]["voltage_cmd"] == before[0]["voltage_cmd"]
+    assert data.noise[0]["motor_current"] == before[0]["motor_current"]
+
+
 def test_a_channel_whose_noise_the_data_do_not_resolve_gets_the_no_noise_floor(laser_recordings):
     """A command with no declared noise, holding still 60 % of the time and jittering there at its tenth
     significant digit (what a 2 ms re-sampling of a seed-97 two-joint case left on a torque command: 6e-9 N m,

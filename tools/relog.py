@@ -1,13 +1,16 @@
 """Re-write recordings as another lab's logger might have written them: to try the diagnosis off home ground.
 
     python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y]
-                          [--jitter-s 0] [--time-unit s] [--seed 0]
+                          [--jitter-s 0] [--time-unit s] [--filtered-noise 0 --filter-hz 100] [--seed 0]
 
 Every NAME.csv (with NAME.json) in SRC_DIR is written to OUT_DIR keeping one sample in `--every` (a 1 ms recording
 logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` of the measured cells left empty
 (drop-outs; references never), the columns `--drop` left out (sensors the rig does not have), each time stamp off by
 up to `--jitter-s` s (uniform; the values stay those of the sample: a logger that stamps when it writes), time in
-`--time-unit` (s or ms; ms is declared in the sidecar as recordings.md asks), and a minimal sidecar:
+`--time-unit` (s or ms; ms is declared in the sidecar as recordings.md asks), `--filtered-noise` x its declared noise
+added to each measured channel the rig declares a noise for and whose values are not quantised (not the encoders', the
+12-bit strain bridges': data.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
+filter or amplifier), and a minimal sidecar:
 format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
 (scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
 what the diagnosis made of seed-97 cases so re-written.
@@ -21,12 +24,17 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import lfilter
+
+from watflex_sim.diagnosis.data import QUANTUM_SHARE, grid_step
+from watflex_sim.rigdesc import load_rig
 
 KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "notes", "locked_joints")  # sidecar keys
 
 
 def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: float = 0.02,
-          drop: frozenset = frozenset(), seed: int = 0, jitter_s: float = 0.0, time_unit: str = "s") -> list[Path]:
+          drop: frozenset = frozenset(), seed: int = 0, jitter_s: float = 0.0, time_unit: str = "s",
+          filtered_noise: float = 0.0, filter_hz: float = 100.0) -> list[Path]:
     """Write each recording of `src` to `out` as the module says; returns the CSV files written."""
     files = sorted(src.glob("*.csv"))
     if not files:
@@ -38,9 +46,13 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
     for path in files:
         with path.open(newline="") as f:
             rows = list(csv.reader(f))
-        header, rows = rows[0], rows[1::every]
+        header, rows = rows[0], rows[1:]
         if header[0] != "time":
             raise ValueError(f"{path}: the first column is {header[0]!r}, not time")
+        meta = json.loads(path.with_suffix(".json").read_text())
+        if filtered_noise:
+            add_filtered_noise(header, rows, meta["rig"], filtered_noise, filter_hz, rng)
+        rows = rows[::every]
         keep = [i for i, name in enumerate(header) if name not in drop]
         with (out / path.name).open("w", newline="") as f:
             writer = csv.writer(f, lineterminator="\n")
@@ -51,11 +63,32 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
                     "" if not header[c].endswith("reference") and rng.random() < empty else row[c]
                     for c in range(1, len(row))]
                 writer.writerow([row[i] for i in keep])
-        meta = json.loads(path.with_suffix(".json").read_text())
         meta = {k: meta[k] for k in KEPT if k in meta} | ({"time_unit": "ms"} if time_unit == "ms" else {})
         (out / path.name).with_suffix(".json").write_text(json.dumps(meta, indent=1))
         written.append(out / path.name)
     return written
+
+
+def add_filtered_noise(header: list[str], rows: list[list[str]], rig: str, times: float, filter_hz: float,
+                       rng: np.random.Generator) -> None:
+    """Add to `rows` (CSV cells, in place) on each measured channel of `rig` with a declared noise and values that are
+    not quantised (their grid's rms step under QUANTUM_SHARE x the noise added): `times` x that noise (rms, its unit)
+    of white noise through a first-order low-pass at `filter_hz` (at the rows' own sample spacing dt: consecutive
+    samples correlated by a = exp(-2 pi filter_hz dt))."""
+    description = load_rig(rig)
+    dt = float(np.median(np.diff([float(r[0]) for r in rows])))  # s
+    a = float(np.exp(-2 * np.pi * filter_hz * dt))
+    for c, name in enumerate(header):
+        spec = description.channels.get(name, {})
+        values = np.array([float(r[c]) if r[c] else np.nan for r in rows])
+        if spec.get("kind") != "measured" or not spec.get("noise"):
+            continue
+        if grid_step(values) / np.sqrt(12) >= QUANTUM_SHARE * times * spec["noise"]:  # an encoder's counts
+            continue
+        noise = times * spec["noise"] * lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(len(rows)))
+        for row, value, extra in zip(rows, values, noise):
+            if np.isfinite(value):
+                row[c] = repr(float(value + extra))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,14 +102,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jitter-s", type=float, default=0.0,
                         help="each time stamp off by up to this, s, uniform (default 0; the values are not moved)")
     parser.add_argument("--time-unit", choices=("s", "ms"), default="s", help="unit of the time column (default s)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the empty cells and the jitter (default 0)")
+    parser.add_argument("--filtered-noise", type=float, default=0.0,
+                        help="x each measured channel's declared noise added, low-passed (default 0: none)")
+    parser.add_argument("--filter-hz", type=float, default=100.0,
+                        help="corner of that noise's first-order low-pass, Hz (default 100)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the empty cells, the jitter and the noise (default 0)")
     args = parser.parse_args(argv)
-    if args.every < 1 or not 0 <= args.empty < 1 or args.jitter_s < 0:
-        print("relog: --every must be >= 1, --empty in [0, 1) and --jitter-s >= 0", file=sys.stderr)
+    if args.every < 1 or not 0 <= args.empty < 1 or args.jitter_s < 0 or args.filtered_noise < 0 or args.filter_hz <= 0:
+        print("relog: --every must be >= 1, --empty in [0, 1), --jitter-s and --filtered-noise >= 0, --filter-hz > 0",
+              file=sys.stderr)
         return 2
     try:
         written = relog(args.src, args.out, args.every, args.start_s, args.empty,
-                        frozenset(c for c in args.drop.split(",") if c), args.seed, args.jitter_s, args.time_unit)
+                        frozenset(c for c in args.drop.split(",") if c), args.seed, args.jitter_s, args.time_unit,
+                        args.filtered_noise, args.filter_hz)
     except (OSError, ValueError, KeyError) as exc:
         print(f"relog: {exc}", file=sys.stderr)
         return 2

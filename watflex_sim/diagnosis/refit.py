@@ -7,12 +7,13 @@ goes back to as fine once a model with effects is not, `fine_for_round` once a r
 parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
 is near the noise but short of it, until training and validation are within it) and keeps the refit only
 if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
-their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in `data.idle`.
-`calibrate_noise` adds to `data` what the rig's noise leaves in closed loop and what a finer
-discretisation changes; `raise_noise_floor` measures both again with a model's findings in and raises the floors they
-exceed. `final_refit` refits a chosen model's parameters on all the data (again from a point
-further along a shape or quantised parameter where a profile there costs less: level.level_start) and returns it with
-its simulations and its counterpart fitted on the training blocks.
+their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in `data.idle`;
+noise correlated over a few samples (data.add_coloured_noise) raises the floors from the nominal model's residual
+before the refit. `calibrate_noise` adds to `data` that noise again on the refit's residual, what the rig's noise
+leaves in closed loop and what a finer discretisation changes; `raise_noise_floor` measures them again with a
+model's findings in and raises the floors they exceed. `final_refit` refits a chosen model's parameters on all the
+data (again from a point further along a shape or quantised parameter where a profile there costs less:
+level.level_start) and returns it with its simulations and its counterpart fitted on the training blocks.
 """
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from .data import Data, Model, add_closed_loop_noise, add_discretisation_error, residual_vector, unit_change
+from .data import (Data, Model, add_closed_loop_noise, add_coloured_noise, add_discretisation_error, residual_vector,
+                   unit_change)
 from .effect_fit import scored
 from .fitting import Slot, effect_slots_of, jacobian, levenberg, rig_slots, value_of
 from .level import level_start, levels
@@ -38,6 +40,8 @@ from .validate import within_noise
 REFIT_ITERATIONS = 8
 RAISED = 1.1  # raise_noise_floor raises a channel's floor measured again with the findings only beyond this factor
 # (a noise ratio 10 % lower: within what the floor's own estimate moves by, and the rest of the diagnosis unchanged)
+# what the progress says where add_coloured_noise raised a floor
+COLOURED = "noise correlated over a few samples (a sensor's filter), more than its samples' differences show"
 COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
 # nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
 # most 2 % to a channel's noise variance, and the 2 x finer comparison (calibrate_noise) then counts it. Measured:
@@ -63,15 +67,19 @@ class Refit:
 def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     """Re-simulate the nominal model and refit the rig's parameters within their tolerances (see the module's
     contract); `say(kind, message)` hears each stage."""
-    # the refit minimises the residual in noise units, what the verdict judges (data.unit_change: in spread
-    # units the noisiest channels' noise swamps a precise channel's misfit)
-    evaluate = evaluator(runner, unit="noise")
     say("nominal", "re-simulating with the nominal model")
     nominal = Model()
     sims_nominal = runner.simulate(nominal)
     if sims_nominal is None:
         raise ConfigError("the nominal model diverges on these recordings")
     sims_nominal, coarse_error = choose_fidelity(data, runner, sims_nominal, say)
+    # the refit minimises the residual in noise units, what the verdict judges (data.unit_change: in spread
+    # units the noisiest channels' noise swamps a precise channel's misfit); noise correlated over a few samples,
+    # measured here already, would otherwise have it chase the noise (the workers' data hold the noise of `prepare`)
+    coloured = add_coloured_noise(data, sims_nominal)
+    if coloured:
+        say("noise", f"{COLOURED}: floors raised ({', '.join(coloured)})")
+    evaluate = in_units(evaluator(runner), unit_change(data)) if coloured else evaluator(runner, unit="noise")
     free = rig_slots(data)
     r_nominal = residual_vector(data, sims_nominal, unit="noise")
     say("refit", f"refitting the {len(free)} nominal parameters within their tolerances")
@@ -177,8 +185,12 @@ def _largest_difference(data: Data, ours: list[Recording], other: list[Recording
 
 
 def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:
-    """Add to `data` what the rig's noise leaves in closed loop (`model` simulated with noise on) and, where a
-    finer discretisation exists, what it changes (data.add_closed_loop_noise, add_discretisation_error)."""
+    """Add to `data` the recordings' noise correlated over a few samples (data.add_coloured_noise, on the residual
+    of `sims`, `model`'s), what the rig's noise leaves in closed loop (`model` simulated with noise on) and, where
+    a finer discretisation exists, what it changes (data.add_closed_loop_noise, add_discretisation_error)."""
+    coloured = add_coloured_noise(data, sims)
+    if coloured:
+        say("noise", f"{COLOURED}: floors raised ({', '.join(coloured)})")
     say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
     noisy = runner.simulate(model, noise_seed=NOISE_SEED)
     if noisy is not None:
