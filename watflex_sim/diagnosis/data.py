@@ -269,12 +269,11 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
 
 def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:
     """Raise each measured channel's noise, and its `sensor_noise`, to the coloured_noise of its residual against
-    `sims` (the refit model, noise off) where that is larger: the recording's noise as the refit model leaves it,
-    measured where the motion is gone. prepare's estimate reads noise correlated over a few samples (a real
-    sensor's filter) as less than it is, and nothing in the catalogue is made of that shortfall. Commands are left
-    to add_closed_loop_noise (the controller's answer to the noise), quantised channels (QUANTUM_SHARE) to
-    measured_noise. Returns "recording: channel xfactor" of each
-    raised."""
+    `sims` (a model, noise off) where that is more than PLATEAU x larger (what the estimates scatter by): the
+    recording's noise measured where the model has taken the motion away. prepare's estimate reads noise correlated
+    over a few samples (a real sensor's filter) as less than it is, and nothing in the catalogue is made of that
+    shortfall. Commands are left to add_closed_loop_noise (the controller's answer to the noise), quantised channels
+    (QUANTUM_SHARE) to measured_noise. Returns "recording: channel xfactor" of each raised."""
     data.sensor_noise = [dict(n) for n in data.sensor_noise]  # raise_noise_floor's scratch shares the list
     measured, raised = set(data.rig.of_kind("measured")), []
     for i, (rec, sim) in enumerate(zip(data.recordings, sims)):
@@ -284,7 +283,8 @@ def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:
             if finite.sum() < 3:
                 continue
             noise = coloured_noise(residual[finite], float(np.median(np.diff(rec.time[finite]))))
-            if noise > data.sensor_noise[i][c] and grid_step(rec.channels[c]) / math.sqrt(12) < QUANTUM_SHARE * noise:
+            quantum = grid_step(rec.channels[c]) / math.sqrt(12)  # its unit: rms of a uniform step's error
+            if noise > PLATEAU * data.sensor_noise[i][c] and quantum < QUANTUM_SHARE * noise:
                 raised.append(f"{data.names[i]}: {c} x{noise / data.sensor_noise[i][c]:.2f}")
                 data.sensor_noise[i][c] = noise
                 data.noise[i][c] = max(data.noise[i][c], noise)
