@@ -29,6 +29,7 @@ from scipy.signal import lfilter
 from watflex_sim.diagnosis.data import QUANTUM_SHARE, grid_step
 from watflex_sim.rigdesc import load_rig
 
+TIME_UNITS = {"s": (1.0, 7), "ms": (1e3, 4)}  # unit -> (its count per s, decimals written: 0.1 us either way)
 KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "notes", "locked_joints")  # sidecar keys
 
 
@@ -41,7 +42,7 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
         raise ValueError(f"{src}: no recordings (*.csv)")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    scale = {"s": 1.0, "ms": 1e3}[time_unit]
+    scale, decimals = TIME_UNITS[time_unit]
     written = []
     for path in files:
         with path.open(newline="") as f:
@@ -59,7 +60,7 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
             writer.writerow([header[i] for i in keep])
             for row in rows:
                 stamp = start_s + float(row[0]) + (jitter_s * rng.uniform(-1, 1) if jitter_s else 0.0)  # s
-                row = [f"{scale * stamp:.{7 - round(np.log10(scale))}f}"] + [
+                row = [f"{scale * stamp:.{decimals}f}"] + [
                     "" if not header[c].endswith("reference") and rng.random() < empty else row[c]
                     for c in range(1, len(row))]
                 writer.writerow([row[i] for i in keep])
@@ -101,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--drop", default="", help="columns to leave out, comma-separated (e.g. tip_x,tip_y)")
     parser.add_argument("--jitter-s", type=float, default=0.0,
                         help="each time stamp off by up to this, s, uniform (default 0; the values are not moved)")
-    parser.add_argument("--time-unit", choices=("s", "ms"), default="s", help="unit of the time column (default s)")
+    parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default="s", help="unit of the time column (default s)")
     parser.add_argument("--filtered-noise", type=float, default=0.0,
                         help="x each measured channel's declared noise added, low-passed (default 0: none)")
     parser.add_argument("--filter-hz", type=float, default=100.0,

@@ -48,8 +48,9 @@ def pattern_search(data: Data, runner: Runner, evaluate, model: Model, free: lis
     return moved, checked["sims"] if checked.get("model") == moved else runner.simulate(moved)
 
 
-def pattern_polish(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> tuple[Model, list[Recording]]:
-    """The final model (its findings' and the rig's parameters) carried on by the pattern search on the training
+def pattern_polish(data: Data, runner: Runner, model: Model, sims: list[Recording], say,
+                   what: str = "the final model") -> tuple[Model, list[Recording]]:
+    """The final model (`what` the progress calls it; its findings' and the rig's parameters) carried on by the pattern search on the training
     blocks where it is short of the noise but near it (compass_worth), kept if validation is no worse: with the
     floors calibrated, as the refit before them, a closed loop that sticks and hunts makes the cost rough and
     Levenberg-Marquardt stops short. Seed 83's two-joint watflex-490a4521, an 11 ms command delay found to the
@@ -60,7 +61,7 @@ def pattern_polish(data: Data, runner: Runner, model: Model, sims: list[Recordin
     if within_noise(train, held) or not compass_worth(train):
         return model, sims
     free = effect_slots_of(data, model) + rig_slots(data)
-    say("polish", f"the final model is short of the noise (training {train['noise_ratio']:.2f} x, validation "
+    say("polish", f"{what} is short of the noise (training {train['noise_ratio']:.2f} x, validation "
         f"{held['noise_ratio']:.2f} x): a pattern search over its {len(free)} parameters (stick-slip makes the cost rough)")
     moved, new = pattern_search(data, runner, in_noise(data, runner), model, free, sims)
     if new is None or fit_scores(data, new, "held_out")["noise_ratio"] > held["noise_ratio"]:

@@ -114,7 +114,8 @@ def spare_a_later_finding(data: Data, runner: Runner, model: Model, ablated: lis
             continue
         say("elimination", f"would the rest explain the data without {effect['effect']} at {effect['where']} "
             f"(validation {ablated[i]['noise_ratio']:.2f} x the noise without it), carried on by the pattern search?")
-        carried, sims = pattern_polish(data, runner, reduced, sims, say)
+        carried, sims = pattern_polish(data, runner, reduced, sims, say,
+                                       f"the model without {effect['effect']} at {effect['where']}")
         train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         if not within_noise(train, held):
             continue
