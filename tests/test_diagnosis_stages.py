@@ -977,9 +977,9 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
     """settle.spare_a_later_finding(): of an offset and a backlash (seed 97's watflex-da19af81 logged at 2 ms: validation
     1.35 x the noise without the backlash, 22.5 x without the offset), the backlash is dropped when the offset and the
     rig's parameters, carried on by the pattern search, are within the noise (1.07 x: NOISE_MARGIN is 1.3), and the model
-    so carried on goes on; it stays when the search ends at 1.4 x, or within the noise by the floors the backlash
-    raised but at 1.5 x by those measured again without it, and the floors are then as they were; where no finding
-    raised them they are not measured again. The offset,
+    so carried on goes on (the progress names it "the model without backlash at elbow"); it stays when the search
+    ends at 1.4 x, or within the noise by the floors the backlash raised but at 1.5 x by those measured again without
+    it, and the floors are then as they were; where no finding raised them they are not measured again. The offset,
     beyond COMPASS_REACH x the margin without it, is never tried. A single finding is left to the refit before it."""
     from types import SimpleNamespace
 
@@ -991,7 +991,10 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
         def simulate(self, model):
             return tuple(e["effect"] for e in model.effects)  # stands for the model's simulations
 
-    def polish(data, runner, model, sims, say):
+    named = []  # what the pattern search's progress calls the model it carries on
+
+    def polish(data, runner, model, sims, say, what="the final model"):
+        named.append(what)
         return Model(model.effects, {**model.parameters, "elbow_inertia": 1.02}), ("carried", *sims)
 
     def scores(data, sims, part):
@@ -1012,7 +1015,7 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
     model, sims = settle.spare_a_later_finding(data, Runner(), both, ablated, lambda *a: None, rejected, True, {})
     assert [e["effect"] for e in model.effects] == ["actuator_offset"] and model.parameters == {"elbow_inertia": 1.02}
     assert sims == ("carried", "actuator_offset") and [r["effect"] for r in rejected] == ["backlash"]
-    assert data.noise == "measured again"
+    assert data.noise == "measured again" and named == ["the model without backlash at elbow"]
     for carried_ratio["raised"], carried_ratio["measured again"] in ((1.4, 1.07), (1.07, 1.5)):
         data.noise, rejected = "raised", []
         assert settle.spare_a_later_finding(data, Runner(), both, ablated, lambda *a: None, rejected, True, {}) is None
