@@ -102,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--drop", default="", help="columns to leave out, comma-separated (e.g. tip_x,tip_y)")
     parser.add_argument("--jitter-s", type=float, default=0.0,
                         help="each time stamp off by up to this, s, uniform (default 0; the values are not moved)")
-    parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default="s", help="unit of the time column (default s)")
+    parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default="s",
+                        help="unit of the time column (default s)")
     parser.add_argument("--filtered-noise", type=float, default=0.0,
                         help="x each measured channel's declared noise added, low-passed (default 0: none)")
     parser.add_argument("--filter-hz", type=float, default=100.0,

@@ -283,8 +283,8 @@ def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:
             if finite.sum() < 3:
                 continue
             noise = coloured_noise(residual[finite], float(np.median(np.diff(rec.time[finite]))))
-            quantum = grid_step(rec.channels[c]) / math.sqrt(12)  # its unit: rms of a uniform step's error
-            if noise > PLATEAU * data.sensor_noise[i][c] and quantum < QUANTUM_SHARE * noise:
+            if (noise > PLATEAU * data.sensor_noise[i][c]  # then whether quantised: the step's rms error, its unit
+                    and grid_step(rec.channels[c]) / math.sqrt(12) < QUANTUM_SHARE * noise):
                 raised.append(f"{data.names[i]}: {c} x{noise / data.sensor_noise[i][c]:.2f}")
                 data.sensor_noise[i][c] = noise
                 data.noise[i][c] = max(data.noise[i][c], noise)

@@ -50,8 +50,9 @@ def pattern_search(data: Data, runner: Runner, evaluate, model: Model, free: lis
 
 def pattern_polish(data: Data, runner: Runner, model: Model, sims: list[Recording], say,
                    what: str = "the final model") -> tuple[Model, list[Recording]]:
-    """The final model (`what` the progress calls it; its findings' and the rig's parameters) carried on by the pattern search on the training
-    blocks where it is short of the noise but near it (compass_worth), kept if validation is no worse: with the
+    """The final model (`what` the progress calls it; its findings' and the rig's parameters) carried on by the
+    pattern search on the training blocks where it is short of the noise but near it (compass_worth), kept if
+    validation is no worse: with the
     floors calibrated, as the refit before them, a closed loop that sticks and hunts makes the cost rough and
     Levenberg-Marquardt stops short. Seed 83's two-joint watflex-490a4521, an 11 ms command delay found to the
     millisecond with the elbow inertia at x1.010 (truth x1.028): training 1.47 x the noise, validation 1.87 x with the

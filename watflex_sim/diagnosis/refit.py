@@ -40,8 +40,6 @@ from .validate import within_noise
 REFIT_ITERATIONS = 8
 RAISED = 1.1  # raise_noise_floor raises a channel's floor measured again with the findings only beyond this factor
 # (a noise ratio 10 % lower: within what the floor's own estimate moves by, and the rest of the diagnosis unchanged)
-# what the progress says where add_coloured_noise raised a floor
-COLOURED = "noise correlated over a few samples (a sensor's filter), more than its samples' differences show"
 COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
 # nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
 # most 2 % to a channel's noise variance, and the 2 x finer comparison (calibrate_noise) then counts it. Measured:
@@ -76,9 +74,7 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     # the refit minimises the residual in noise units, what the verdict judges (data.unit_change: in spread
     # units the noisiest channels' noise swamps a precise channel's misfit); noise correlated over a few samples,
     # measured here already, would otherwise have it chase the noise (the workers' data hold the noise of `prepare`)
-    coloured = add_coloured_noise(data, sims_nominal)
-    if coloured:
-        say("noise", f"{COLOURED}: floors raised ({', '.join(coloured)})")
+    coloured = raise_coloured_noise(data, sims_nominal, say)
     evaluate = in_units(evaluator(runner), unit_change(data)) if coloured else evaluator(runner, unit="noise")
     free = rig_slots(data)
     r_nominal = residual_vector(data, sims_nominal, unit="noise")
@@ -184,13 +180,20 @@ def _largest_difference(data: Data, ours: list[Recording], other: list[Recording
     return max((r["ratio"] for r in channel_ratios(replace(data, recordings=ours), other)), default=0.0)
 
 
+def raise_coloured_noise(data: Data, sims: list[Recording], say) -> list[str]:
+    """data.add_coloured_noise on the residual of `sims`, the progress told of each floor raised; returns them."""
+    raised = add_coloured_noise(data, sims)
+    if raised:
+        say("noise", "noise correlated over a few samples (a sensor's filter), more than its samples' differences "
+                     f"show: floors raised ({', '.join(raised)})")
+    return raised
+
+
 def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:
     """Add to `data` the recordings' noise correlated over a few samples (data.add_coloured_noise, on the residual
     of `sims`, `model`'s), what the rig's noise leaves in closed loop (`model` simulated with noise on) and, where
     a finer discretisation exists, what it changes (data.add_closed_loop_noise, add_discretisation_error)."""
-    coloured = add_coloured_noise(data, sims)
-    if coloured:
-        say("noise", f"{COLOURED}: floors raised ({', '.join(coloured)})")
+    raise_coloured_noise(data, sims, say)
     say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
     noisy = runner.simulate(model, noise_seed=NOISE_SEED)
     if noisy is not None:
