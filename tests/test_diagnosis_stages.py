@@ -13,6 +13,7 @@ from watflex_sim.diagnosis.fitting import huber_threshold, residual_variance
 from watflex_sim.diagnosis.validate import explained_share
 from watflex_sim.diagnosis.tolerance import fold_within_tolerance
 from watflex_sim.model import load_model
+from watflex_sim.rigdesc import load_rig
 from watflex_sim.recording import Recording
 
 
@@ -187,6 +188,61 @@ def test_time_stamps_a_logger_jittered_are_compared_at_the_loops_ticks(laser_rec
         assert data_module.on_ticks(other, 1e-3) == (other, 0.0)
     anywhere = np.cumsum(np.random.default_rng(1).uniform(2.6e-3, 3.4e-3, rec.time.size))  # exact, off any grid
     assert data_module.on_ticks(Recording(anywhere, rec.channels, rec.meta), 1e-3)[1] == 0.0
+
+
+def test_glitches_are_one_or_two_samples_off_the_line_their_neighbours_lie_on():
+    """glitch.glitch_samples: on 200,000 samples of white noise (sd 1) none is a glitch (8 sd of a sample's offset
+    from its neighbours' mean: ~1e-15 a sample); 40 single samples moved by 25 sd (2.5 x GLITCH), either way, and
+    then 40 pairs of neighbours moved alike by 25 sd are all found and nothing else; what the rig's signals do at
+    the loop's rate is none: a step of 100 sd, a corner (a cusp, 100 sd a sample either side), a 480 Hz oscillation
+    of 50 sd sampled at 1 kHz (a beam mode near the sampling rate), an encoder's count flickering (noise: its step's
+    rms), three samples moved by 100 sd (a pulse the rig's command gave)."""
+    from watflex_sim.diagnosis.glitch import GLITCH, glitch_samples
+
+    rng = np.random.default_rng(0)
+    noise = rng.normal(size=200_000)
+    assert not glitch_samples(noise, 1.0).any()
+    where = np.arange(1000, 200_000, 5000)
+    moved = noise.copy()
+    moved[where] += 25.0 * np.where(np.arange(where.size) % 2, 1.0, -1.0)
+    assert 25.0 >= 2.5 * GLITCH and np.array_equal(np.flatnonzero(glitch_samples(moved, 1.0)), where)
+    moved = noise.copy()
+    moved[where] += 25.0
+    moved[where + 1] += 25.0
+    assert np.array_equal(np.flatnonzero(glitch_samples(moved, 1.0)), np.sort(np.r_[where, where + 1]))
+    k = np.arange(2000.0)
+    step = noise[:2000] + 100.0 * (k >= 1000)
+    cusp = noise[:2000] + 100.0 * np.abs(k - 1000)
+    oscillation = noise[:2000] + 50.0 * np.sin(2 * np.pi * 480.0 * k * 1e-3)
+    flicker = np.round(0.3 * np.sin(k / 50.0) + 0.5 * (k % 7 == 0))  # counts: 0, now and then 1
+    pulse = noise[:2000] + 100.0 * ((k >= 1000) & (k < 1003))
+    for values, sd in ((step, 1.0), (cusp, 1.0), (oscillation, 1.0), (flicker, 1 / math.sqrt(12)), (pulse, 1.0)):
+        assert not glitch_samples(values, sd).any()
+
+
+def test_a_loggers_glitches_are_left_out_and_the_rigs_own_spikes_kept(laser_recordings):
+    """data.prepare leaves out a measured channel's glitches (glitch.without_glitches: empty cells, as a logger's
+    missing samples) and says so in the split's description: three tip-sensor samples moved by 20 x its declared
+    noise are NaN, and a motor-current glitch at the sample of one of them (a row written wrong); nothing else
+    changes. A spike the command has at the same sample (a controller's kick) makes the motor current's spike the
+    rig's: kept. A recording without one is the same object."""
+    rec = laser_recordings[0]
+    sd = load_rig("laser_arm").channels["tip_sensor"]["noise"]
+    tip, current, command = (rec.channels[c].copy() for c in ("tip_sensor", "motor_current", "voltage_cmd"))
+    tip[[150, 220, 330]] += 20.0 * sd
+    current[[220, 250]] += 1.0
+    command[250] += 5.0
+    edited = Recording(rec.time, {**rec.channels, "tip_sensor": tip, "motor_current": current, "voltage_cmd": command},
+                       rec.meta)
+    data = prepare([edited], ["a.csv"])
+    cleaned = data.recordings[0].channels
+    assert np.array_equal(np.flatnonzero(np.isnan(cleaned["tip_sensor"])), [150, 220, 330])
+    assert np.array_equal(np.flatnonzero(np.isnan(cleaned["motor_current"])), [220])
+    assert cleaned["motor_current"][250] == current[250] and np.array_equal(cleaned["voltage_cmd"], command)
+    assert "(a logger's glitches): a.csv (tip_sensor 3, motor_current 1)" in data.how
+    assert data.glitches == ["a.csv (tip_sensor 3, motor_current 1)"]
+    made = prepare([rec], ["a.csv"])
+    assert made.recordings[0] is rec and "glitches" not in made.how
 
 
 def test_intervals_cover_a_linear_fit_as_often_as_they_say():

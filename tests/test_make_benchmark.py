@@ -392,7 +392,8 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     written in ms (the sidecar says so), the reader gives times within 0.2 ms of the ticks and the values unmoved. With
     --filtered-noise 2 the tip sensor carries 2 x its declared 0.01 V more (within 25 %: 400 samples of noise correlated
     over ~2), correlated from sample to sample as a 100 Hz first-order low-pass at 1 kHz (0.53, within 0.15); the
-    encoder, quantised, is left as it was."""
+    encoder, quantised, is left as it was. With --glitches 3 three cells of each measured channel move, each by
+    --glitch-size 30 x its declared noise; a negative count is refused."""
     from watflex_sim import load_scenario, simulate, write_recording
 
     spec = importlib.util.spec_from_file_location("relog", ROOT / "tools" / "relog.py")
@@ -425,3 +426,10 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     assert np.std(added) == pytest.approx(2 * 0.01, rel=0.25)  # rigs/laser_arm.toml: tip_sensor noise 0.01 V
     assert np.corrcoef(added[1:], added[:-1])[0, 1] == pytest.approx(np.exp(-2 * np.pi * 100 * 1e-3), abs=0.15)
     assert np.array_equal(out.channels["hub_angle"], written_all["hub_angle"])  # an encoder: quantised, left
+    assert relog.main([str(tmp_path / "src"), str(tmp_path / "f"), "--every", "1", "--empty", "0", "--glitches", "3",
+                       "--glitch-size", "30"]) == 0  # three samples a measured channel moved by 30 x its noise
+    out = read_recording(tmp_path / "f" / "step.csv")
+    for channel, noise in (("tip_sensor", 0.01), ("motor_current", 0.004), ("hub_angle", 2e-5)):  # rigs/laser_arm.toml
+        moved = np.abs(out.channels[channel] - written_all[channel])
+        assert np.count_nonzero(moved) == 3 and np.allclose(moved[moved > 0], 30 * noise, rtol=1e-6)
+    assert relog.main([str(tmp_path / "src"), str(tmp_path / "g"), "--glitches", "-1"]) == 2

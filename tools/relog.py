@@ -1,7 +1,8 @@
 """Re-write recordings as another lab's logger might have written them: to try the diagnosis off home ground.
 
     python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y]
-                          [--jitter-s 0] [--time-unit s] [--filtered-noise 0 --filter-hz 100] [--seed 0]
+                          [--jitter-s 0] [--time-unit s] [--filtered-noise 0 --filter-hz 100]
+                          [--glitches 0 --glitch-size 30] [--seed 0]
 
 Every NAME.csv (with NAME.json) in SRC_DIR is written to OUT_DIR keeping one sample in `--every` (a 1 ms recording
 logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` of the measured cells left empty
@@ -10,7 +11,8 @@ up to `--jitter-s` s (uniform; the values stay those of the sample: a logger tha
 `--time-unit` (s or ms; ms is declared in the sidecar as recordings.md asks), `--filtered-noise` x its declared noise
 added to each measured channel the rig declares a noise for and whose values are not quantised (not the encoders', the
 12-bit strain bridges': data.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
-filter or amplifier), and a minimal sidecar:
+filter or amplifier), `--glitches` single samples of each measured channel with a declared noise moved by
+`--glitch-size` x that noise (either sign; a logger's glitches, after the sampling), and a minimal sidecar:
 format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
 (scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
 what the diagnosis made of seed-97 cases so re-written.
@@ -35,7 +37,8 @@ KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "note
 
 def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: float = 0.02,
           drop: frozenset = frozenset(), seed: int = 0, jitter_s: float = 0.0, time_unit: str = "s",
-          filtered_noise: float = 0.0, filter_hz: float = 100.0) -> list[Path]:
+          filtered_noise: float = 0.0, filter_hz: float = 100.0, glitches: int = 0, glitch_size: float = 30.0
+          ) -> list[Path]:
     """Write each recording of `src` to `out` as the module says; returns the CSV files written."""
     files = sorted(src.glob("*.csv"))
     if not files:
@@ -54,6 +57,8 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
         if filtered_noise:
             add_filtered_noise(header, rows, meta["rig"], filtered_noise, filter_hz, rng)
         rows = rows[::every]
+        if glitches:
+            add_glitches(header, rows, meta["rig"], glitches, glitch_size, rng)
         keep = [i for i, name in enumerate(header) if name not in drop]
         with (out / path.name).open("w", newline="") as f:
             writer = csv.writer(f, lineterminator="\n")
@@ -92,6 +97,20 @@ def add_filtered_noise(header: list[str], rows: list[list[str]], rig: str, times
                 row[c] = repr(float(value + extra))
 
 
+def add_glitches(header: list[str], rows: list[list[str]], rig: str, count: int, size: float,
+                 rng: np.random.Generator) -> None:
+    """Move `count` cells of each measured channel of `rig` with a declared noise (in place; distinct rows with a
+    value, not the first or last ten) by `size` x that noise (its unit), each up or down at random."""
+    description = load_rig(rig)
+    for c, name in enumerate(header):
+        spec = description.channels.get(name, {})
+        if spec.get("kind") != "measured" or not spec.get("noise"):
+            continue
+        filled = [i for i in range(10, len(rows) - 10) if rows[i][c]]
+        for i in rng.choice(filled, size=min(count, len(filled)), replace=False):
+            rows[i][c] = repr(float(rows[i][c]) + size * spec["noise"] * float(rng.choice((-1.0, 1.0))))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("src", type=Path, help="folder of NAME.csv + NAME.json recordings (a benchmark case)")
@@ -108,17 +127,22 @@ def main(argv: list[str] | None = None) -> int:
                         help="x each measured channel's declared noise added, low-passed (default 0: none)")
     parser.add_argument("--filter-hz", type=float, default=100.0,
                         help="corner of that noise's first-order low-pass, Hz (default 100)")
+    parser.add_argument("--glitches", type=int, default=0,
+                        help="single samples of each measured channel moved, per recording (default 0: none)")
+    parser.add_argument("--glitch-size", type=float, default=30.0,
+                        help="how far each is moved, x the channel's declared noise (default 30)")
     parser.add_argument("--seed", type=int, default=0,
-                        help="seed of the empty cells, the jitter and the noise (default 0)")
+                        help="seed of the empty cells, the jitter, the noise and the glitches (default 0)")
     args = parser.parse_args(argv)
-    if args.every < 1 or not 0 <= args.empty < 1 or args.jitter_s < 0 or args.filtered_noise < 0 or args.filter_hz <= 0:
-        print("relog: --every must be >= 1, --empty in [0, 1), --jitter-s and --filtered-noise >= 0, --filter-hz > 0",
-              file=sys.stderr)
+    if (args.every < 1 or not 0 <= args.empty < 1 or args.jitter_s < 0 or args.filtered_noise < 0 or args.filter_hz <= 0
+            or args.glitches < 0):
+        print("relog: --every must be >= 1, --empty in [0, 1), --jitter-s, --filtered-noise and --glitches >= 0, "
+              "--filter-hz > 0", file=sys.stderr)
         return 2
     try:
         written = relog(args.src, args.out, args.every, args.start_s, args.empty,
                         frozenset(c for c in args.drop.split(",") if c), args.seed, args.jitter_s, args.time_unit,
-                        args.filtered_noise, args.filter_hz)
+                        args.filtered_noise, args.filter_hz, args.glitches, args.glitch_size)
     except (OSError, ValueError, KeyError) as exc:
         print(f"relog: {exc}", file=sys.stderr)
         return 2

@@ -20,6 +20,7 @@ import numpy as np
 from ..model import ConfigError
 from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
+from .glitch import without_glitches
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
 BLOCKS_PER_RECORDING = 60  # blocks per recording, in pairs of one training and one validation block (split_blocks):
@@ -82,6 +83,7 @@ class Data:
     discretisation_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what a
     # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
     motion_memo: list | None = None  # `motions`' answer, once asked
+    glitches: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a logger's glitches left out
 
     @property
     def noise_floor(self) -> list[dict[str, float]]:
@@ -235,21 +237,28 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     prints = [_fingerprint(r) for r in recordings]
     order = sorted(range(len(recordings)), key=lambda i: (names[i], prints[i]))
     recordings, names, prints = [recordings[i] for i in order], [names[i] for i in order], [prints[i] for i in order]
-    outputs = set(rig.of_kind("measured"))
+    outputs, commands = set(rig.of_kind("measured")), set(rig.of_kind("command"))
     moved = [on_ticks(r, rig.period_of(r.meta)) for r in recordings]
     recordings = [r for r, _ in moved]
-    channels, scale, noise, train, blocks = [], [], [], [], []
+    channels, scale, noise, train, blocks, cleaned, glitched = [], [], [], [], [], [], []
     for rec, name, fingerprint in zip(recordings, names, prints):
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
-        wanted = outputs | (set(rig.of_kind("command")) if closed else set())
+        wanted = outputs | (commands if closed else set())
         chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
                  and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
         if not chans:
             raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
-        spread = {c: float(np.nanstd(rec.channels[c])) or 1.0 for c in chans}
         declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
+        sensors, given = [c for c in rec.channels if c in outputs], [c for c in rec.channels if c in commands]
+        rec, counts = without_glitches(rec, sensors, given, {  # an open loop's commands too: where a kick was
+            c: max(float(rig.channels[c].get("noise", 0.0)), measured_noise(rec.channels[c]))
+            or NO_NOISE_FLOOR * float(np.nanstd(rec.channels[c])) for c in sensors + given})
+        cleaned.append(rec)
+        if counts:
+            glitched.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")")
+        spread = {c: float(np.nanstd(rec.channels[c])) or 1.0 for c in chans}
         channels.append(chans)
         scale.append(spread)
         noise.append({c: max(declared[c], visible_noise(rec.channels[c], spread[c])) or NO_NOISE_FLOOR * spread[c]
@@ -264,7 +273,10 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     jittered = [f"{name} by up to {m * 1e3:.2g} ms" for name, (_, m) in zip(names, moved) if m]
     if jittered:
         how += ("; time stamps moved onto the control loop's ticks (a logger's clock jitter): " + ", ".join(jittered))
-    return Data(recordings, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise])
+    if glitched:
+        how += f"; samples far off their neighbours' line left out (a logger's glitches): {', '.join(glitched)}"
+    return Data(cleaned, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise],
+                glitches=glitched)
 
 
 def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:

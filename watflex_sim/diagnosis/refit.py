@@ -65,6 +65,9 @@ class Refit:
 def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     """Re-simulate the nominal model and refit the rig's parameters within their tolerances (see the module's
     contract); `say(kind, message)` hears each stage."""
+    if data.glitches:
+        say("nominal", "left out as a logger's glitches (one or two samples far off their neighbours' line): "
+            + ", ".join(data.glitches))
     say("nominal", "re-simulating with the nominal model")
     nominal = Model()
     sims_nominal = runner.simulate(nominal)
