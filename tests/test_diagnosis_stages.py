@@ -245,6 +245,25 @@ def test_a_loggers_glitches_are_left_out_and_the_rigs_own_spikes_kept(laser_reco
     assert made.recordings[0] is rec and "glitches" not in made.how
 
 
+def test_a_camera_is_compared_at_every_frame_whatever_the_clock_reads(tmp_path):
+    """resim._sampled: a 6 s Watflex elbow step (its camera at 25 Hz: 150 frames, NaN between) written to CSV and read
+    back, and the same with its clock started at 100 s (a logger's clock), re-simulated with the noise off: the
+    simulated camera has a value at each of the 150 frames, the same values either way. Interpolated at the recording's
+    times, which are ~1e-14 s off the simulation's ticks, beside an empty tick, it had 134 as made and 6 from 100 s."""
+    from watflex_sim import write_recording
+    from watflex_sim.recording import read_recording
+    from watflex_sim.resim import resimulate
+
+    made = read_recording(write_recording(simulate(load_scenario("watflex_elbow_step")).recording, tmp_path, "a"))
+    later = read_recording(write_recording(Recording(made.time + 100.0, made.channels, made.meta), tmp_path, "b"))
+    sims = [resimulate(r) for r in (made, later)]
+    frames = np.isfinite(made.channels["tip_x"])
+    assert frames.sum() == 150 and np.array_equal(np.isfinite(later.channels["tip_x"]), frames)
+    for sim in sims:
+        assert np.array_equal(np.isfinite(sim.channels["tip_x"]), frames)
+    assert np.array_equal(sims[0].channels["tip_x"][frames], sims[1].channels["tip_x"][frames])
+
+
 def test_intervals_cover_a_linear_fit_as_often_as_they_say():
     """y = a t + white noise, fitted by least squares: the 95 % interval from the Jacobian covers
     the true a in 95 % +- 4 % of 400 seeds (binomial: 2 sd = 2.2 %)."""

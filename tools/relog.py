@@ -12,7 +12,8 @@ up to `--jitter-s` s (uniform; the values stay those of the sample: a logger tha
 added to each measured channel the rig declares a noise for and whose values are not quantised (not the encoders', the
 12-bit strain bridges': data.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
 filter or amplifier), `--glitches` single samples of each measured channel with a declared noise moved by
-`--glitch-size` x that noise (either sign; a logger's glitches, after the sampling), and a minimal sidecar:
+`--glitch-size` x that noise (either sign; a logger's glitches, after the sampling; a channel with fewer values, as
+many fewer), and a minimal sidecar:
 format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
 (scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
 what the diagnosis made of seed-97 cases so re-written.
@@ -100,14 +101,16 @@ def add_filtered_noise(header: list[str], rows: list[list[str]], rig: str, times
 def add_glitches(header: list[str], rows: list[list[str]], rig: str, count: int, size: float,
                  rng: np.random.Generator) -> None:
     """Move `count` cells of each measured channel of `rig` with a declared noise (in place; distinct rows with a
-    value, not the first or last ten) by `size` x that noise (its unit), each up or down at random."""
+    value, not the first or last ten) by `size` x that noise (its unit), each up or down at random; a channel with
+    values in fewer rows (the 25 Hz camera) as many fewer (rounded): glitches at one rate a value written."""
     description = load_rig(rig)
     for c, name in enumerate(header):
         spec = description.channels.get(name, {})
         if spec.get("kind") != "measured" or not spec.get("noise"):
             continue
         filled = [i for i in range(10, len(rows) - 10) if rows[i][c]]
-        for i in rng.choice(filled, size=min(count, len(filled)), replace=False):
+        share = len(filled) / max(1, len(rows) - 20)  # of the rows a channel at the full rate has values in
+        for i in rng.choice(filled, size=min(round(count * share), len(filled)), replace=False):
             rows[i][c] = repr(float(rows[i][c]) + size * spec["noise"] * float(rng.choice((-1.0, 1.0))))
 
 

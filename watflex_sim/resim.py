@@ -143,8 +143,20 @@ def _resim_scenario(rig: RigDescription, rec: Recording, effects=(), parameters=
     return scenario
 
 
+SAME_TIME = 1e-6  # x the simulation's sample spacing: a recording's time this near one of its samples is that sample's
+
+
 def _sampled(rec: Recording, sim: Recording) -> Recording:
-    """A simulation's channels sampled at the recording's times."""
+    """A simulation's channels sampled at the recording's times: at the simulation's own sample where a recording's
+    time is within SAME_TIME of it, else interpolated. A logger's clock started at 100 s leaves its times, less the
+    first, ~1e-14 s off the ticks, and interpolating a channel the simulation gives on some ticks only (the 25 Hz
+    camera, NaN between frames) beside an empty tick gives nothing: seed 94's Watflex recordings so re-logged compared
+    their camera on 6 frames of 150 (at whole seconds), and on none once a glitch took one of them out."""
     t = rec.time - rec.time[0]
+    grid = sim.time
+    after = np.clip(np.searchsorted(grid, t), 1, grid.size - 1)
+    nearest = np.where(np.abs(grid[after - 1] - t) <= np.abs(grid[after] - t), after - 1, after)
+    tolerance = SAME_TIME * float(np.median(np.diff(grid))) if grid.size > 1 else 0.0
+    t = np.where(np.abs(grid[nearest] - t) <= tolerance, grid[nearest], t)
     channels = {c: np.interp(t, sim.time, v) for c, v in sim.channels.items() if c in rec.channels}
     return Recording(rec.time.copy(), channels, sim.meta)

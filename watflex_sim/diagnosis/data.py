@@ -228,8 +228,9 @@ def split_blocks(time: np.ndarray, salt: int = 0) -> tuple[np.ndarray, float]:
 
 
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
-    """Check the recordings share one rig and have comparable channels; order them canonically;
-    split each into training and validation blocks; take each channel's spread and noise."""
+    """Check the recordings share one rig and have comparable channels; order them canonically; leave out a
+    logger's glitches (glitch.without_glitches); split each into training and validation blocks; take each
+    channel's spread and noise."""
     rigs = {r.rig for r in recordings}
     if len(rigs) != 1:
         raise ConfigError(f"recordings of different rigs in one diagnosis: {', '.join(sorted(rigs))}")
@@ -244,13 +245,6 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     for rec, name, fingerprint in zip(recordings, names, prints):
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
-        closed = rec.meta.get("mode", "closed_loop") != "open_loop"
-        wanted = outputs | (commands if closed else set())
-        chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
-                 and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
-        if not chans:
-            raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
-        declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
         sensors, given = [c for c in rec.channels if c in outputs], [c for c in rec.channels if c in commands]
         rec, counts = without_glitches(rec, sensors, given, {  # an open loop's commands too: where a kick was
             c: max(float(rig.channels[c].get("noise", 0.0)), measured_noise(rec.channels[c]))
@@ -258,6 +252,13 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         cleaned.append(rec)
         if counts:
             glitched.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")")
+        closed = rec.meta.get("mode", "closed_loop") != "open_loop"
+        wanted = outputs | (commands if closed else set())
+        chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
+                 and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
+        if not chans:
+            raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
+        declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
         spread = {c: float(np.nanstd(rec.channels[c])) or 1.0 for c in chans}
         channels.append(chans)
         scale.append(spread)
