@@ -3,16 +3,16 @@ sampled at the loop's rate does.
 
 Contract: `without_glitches(rec, measured, commands, noise)` returns the recording with every glitch of a measured
 channel made empty cells (NaN: compared nowhere, as a logger's missing samples) and how many samples it emptied on
-each channel; a recording without one is returned as it is. A glitch (`glitch_samples`) moves one sample, or two neighbours
-alike, by more than GLITCH x the channel's noise, and each sample from two before it to two after it is off the mean
-of its own neighbours as that alone makes it (RUNS, within GLITCH_SHAPE): the samples around it lie on a line. A step
-(a current at a voltage step) is off by a half at two samples in opposite senses, a corner (a cusp) leaves its
-neighbours on their lines, a fast oscillation (a beam mode near the sampling rate) is off at every sample: none is a
-glitch. One that a command of the recording has within a sample (a controller's kick through a derivative, its
-answer to a sensor's spike) is the rig's and kept; one that only other measured channels share is a logger's (a row
-written wrong). Seed 94's clean laser case with six single samples a recording moved by 30 x the noise on the tip
-sensor and the motor current (0.1 % of the samples) came out `unexplained` (motor current 1.37 x its noise, the
-residual's windows the glitches) in 104 s; docs/diagnosis.md, "A logger's glitches".
+each channel; a recording without one is returned as it is. A glitch (`glitch_samples`) moves one sample, or two
+neighbours alike, by more than GLITCH x the channel's noise, and each sample from two before it to two after it is
+off the mean of its own neighbours as that alone makes it (RUNS, within GLITCH_SHAPE): the samples around it lie on
+a line. A step (a current at a voltage step) is off by a half at two samples in opposite senses, a corner (a cusp)
+leaves its neighbours on their lines, a fast oscillation (a beam mode near the sampling rate) is off at every
+sample: none is a glitch. One that a command of the recording has within a sample (a controller's kick through a
+derivative, its answer to a sensor's spike) is the rig's and kept; one that only other measured channels share is a
+logger's (a row written wrong). Seed 94's clean laser case with six single samples a recording moved by 30 x the
+noise on the tip sensor and the motor current (0.1 % of the samples) came out `unexplained` (motor current 1.47 x
+its noise, the residual's windows the glitches) in 265 s; docs/diagnosis.md, "A logger's glitches".
 """
 from __future__ import annotations
 
