@@ -76,23 +76,28 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
     return written
 
 
+def noisy_columns(header: list[str], rig: str):
+    """(column index, declared noise rms in its unit) of each measured channel of `rig` in `header` that declares one."""
+    description = load_rig(rig)
+    for c, name in enumerate(header):
+        spec = description.channels.get(name, {})
+        if spec.get("kind") == "measured" and spec.get("noise"):
+            yield c, float(spec["noise"])
+
+
 def add_filtered_noise(header: list[str], rows: list[list[str]], rig: str, times: float, filter_hz: float,
                        rng: np.random.Generator) -> None:
     """Add to `rows` (CSV cells, in place) on each measured channel of `rig` with a declared noise and values that are
     not quantised (their grid's rms step under QUANTUM_SHARE x the noise added): `times` x that noise (rms, its unit)
     of white noise through a first-order low-pass at `filter_hz` (at the rows' own sample spacing dt: consecutive
     samples correlated by a = exp(-2 pi filter_hz dt))."""
-    description = load_rig(rig)
     dt = float(np.median(np.diff([float(r[0]) for r in rows])))  # s
     a = float(np.exp(-2 * np.pi * filter_hz * dt))
-    for c, name in enumerate(header):
-        spec = description.channels.get(name, {})
+    for c, declared in noisy_columns(header, rig):
         values = np.array([float(r[c]) if r[c] else np.nan for r in rows])
-        if spec.get("kind") != "measured" or not spec.get("noise"):
+        if grid_step(values) / np.sqrt(12) >= QUANTUM_SHARE * times * declared:  # an encoder's counts
             continue
-        if grid_step(values) / np.sqrt(12) >= QUANTUM_SHARE * times * spec["noise"]:  # an encoder's counts
-            continue
-        noise = times * spec["noise"] * lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(len(rows)))
+        noise = times * declared * lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(len(rows)))
         for row, value, extra in zip(rows, values, noise):
             if np.isfinite(value):
                 row[c] = repr(float(value + extra))
@@ -103,15 +108,11 @@ def add_glitches(header: list[str], rows: list[list[str]], rig: str, count: int,
     """Move `count` cells of each measured channel of `rig` with a declared noise (in place; distinct rows with a
     value, not the first or last ten) by `size` x that noise (its unit), each up or down at random; a channel with
     values in fewer rows (the 25 Hz camera) as many fewer (rounded): glitches at one rate a value written."""
-    description = load_rig(rig)
-    for c, name in enumerate(header):
-        spec = description.channels.get(name, {})
-        if spec.get("kind") != "measured" or not spec.get("noise"):
-            continue
+    for c, declared in noisy_columns(header, rig):
         filled = [i for i in range(10, len(rows) - 10) if rows[i][c]]
         share = len(filled) / max(1, len(rows) - 20)  # of the rows a channel at the full rate has values in
         for i in rng.choice(filled, size=min(round(count * share), len(filled)), replace=False):
-            rows[i][c] = repr(float(rows[i][c]) + size * spec["noise"] * float(rng.choice((-1.0, 1.0))))
+            rows[i][c] = repr(float(rows[i][c]) + size * declared * float(rng.choice((-1.0, 1.0))))
 
 
 def main(argv: list[str] | None = None) -> int:

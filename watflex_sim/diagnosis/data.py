@@ -227,6 +227,13 @@ def split_blocks(time: np.ndarray, salt: int = 0) -> tuple[np.ndarray, float]:
     return training & (t < FIT_SECONDS), block
 
 
+def _noise(rig: RigDescription, rec: Recording, channel: str, estimate: float) -> float:
+    """A channel's noise (rms, its unit): the rig's declared noise or `estimate` from the recording, the larger;
+    NO_NOISE_FLOOR x the channel's spread where both are 0."""
+    values = rec.channels[channel]
+    return max(float(rig.channels[channel].get("noise", 0.0)), estimate) or NO_NOISE_FLOOR * float(np.nanstd(values))
+
+
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
     """Check the recordings share one rig and have comparable channels; order them canonically; leave out a
     logger's glitches (glitch.without_glitches); split each into training and validation blocks; take each
@@ -247,8 +254,7 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         sensors, given = [c for c in rec.channels if c in outputs], [c for c in rec.channels if c in commands]
         rec, counts = without_glitches(rec, sensors, given, {  # an open loop's commands too: where a kick was
-            c: max(float(rig.channels[c].get("noise", 0.0)), measured_noise(rec.channels[c]))
-            or NO_NOISE_FLOOR * float(np.nanstd(rec.channels[c])) for c in sensors + given})
+            c: _noise(rig, rec, c, measured_noise(rec.channels[c])) for c in sensors + given})
         cleaned.append(rec)
         if counts:
             glitched.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")")
@@ -258,12 +264,10 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
                  and np.nanstd(rec.channels[c]) > 0]  # a constant channel (a locked joint) tells nothing
         if not chans:
             raise ConfigError(f"{name}: no measured channel of rig {rig.name} to compare")
-        declared = {c: float(rig.channels[c].get("noise", 0.0)) for c in chans}
         spread = {c: float(np.nanstd(rec.channels[c])) or 1.0 for c in chans}
         channels.append(chans)
         scale.append(spread)
-        noise.append({c: max(declared[c], visible_noise(rec.channels[c], spread[c])) or NO_NOISE_FLOOR * spread[c]
-                      for c in chans})
+        noise.append({c: _noise(rig, rec, c, visible_noise(rec.channels[c], spread[c])) for c in chans})
         mask, block = split_blocks(rec.time, int(fingerprint[:8], 16))
         train.append(mask)
         blocks.append(block)
