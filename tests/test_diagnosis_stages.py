@@ -245,6 +245,30 @@ def test_a_loggers_glitches_are_left_out_and_the_rigs_own_spikes_kept(laser_reco
     assert made.recordings[0] is rec and "glitches" not in made.how
 
 
+def test_a_slower_sensors_values_a_logger_held_are_compared_once():
+    """data.prepare (glitch.without_held): a 1.5 s Watflex elbow step's 25 Hz camera written in every 1 ms row as its
+    last frame (a logger holding it) is compared at its frames only: tip_x and tip_y finite exactly where the files as
+    made have them (38 frames), the repeats counted in the split's description. An elbow encoder at a steady speed,
+    one count every 7 ms (runs as even as a held sensor's, but on a grid as coarse as its noise), and the files as
+    made are left as they are."""
+    rec = simulate(load_scenario("watflex_elbow_step", ["duration_s=1.5"])).recording
+    frames = np.isfinite(rec.channels["tip_x"])
+    held = {c: rec.channels[c][np.maximum.accumulate(np.where(frames, np.arange(frames.size), 0))]
+            for c in ("tip_x", "tip_y")}
+    count = 2 * math.pi / (4 * 1024 * 80)  # rad: an encoder's count (rigs.md)
+    steady = count * np.floor(np.arange(frames.size) / 7.0)
+    edited = Recording(rec.time, {**rec.channels, **held, "elbow_angle": steady}, rec.meta)
+    data = prepare([edited], ["a.csv"])
+    cleaned = data.recordings[0].channels
+    for c in ("tip_x", "tip_y"):
+        assert np.array_equal(np.isfinite(cleaned[c]), frames) and np.array_equal(cleaned[c][frames], held[c][frames])
+    assert frames.sum() == 38 and np.array_equal(cleaned["elbow_angle"], steady)
+    repeats = frames.size - 38
+    assert data.held == [f"a.csv (tip_x {repeats}, tip_y {repeats})"] and "a logger held" in data.how
+    made = prepare([rec], ["a.csv"])
+    assert made.held == [] and made.recordings[0] is rec
+
+
 def test_a_camera_is_compared_at_every_frame_whatever_the_clock_reads(tmp_path):
     """resim._sampled: a 6 s Watflex elbow step (its camera at 25 Hz: 150 frames, NaN between) written to CSV and read
     back, and the same with its clock started at 100 s (a logger's clock), re-simulated with the noise off: the

@@ -2,7 +2,7 @@
 
     python tools/relog.py SRC_DIR OUT_DIR [--every 2] [--start-s 100] [--empty 0.02] [--drop tip_x,tip_y]
                           [--jitter-s 0] [--time-unit s] [--filtered-noise 0 --filter-hz 100]
-                          [--glitches 0 --glitch-size 30] [--seed 0]
+                          [--glitches 0 --glitch-size 30] [--hold tip_x,tip_y] [--seed 0]
 
 Every NAME.csv (with NAME.json) in SRC_DIR is written to OUT_DIR keeping one sample in `--every` (a 1 ms recording
 logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` of the measured cells left empty
@@ -13,7 +13,8 @@ added to each measured channel the rig declares a noise for and whose values are
 12-bit strain bridges': data.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
 filter or amplifier), `--glitches` single samples of each measured channel with a declared noise moved by
 `--glitch-size` x that noise (either sign; a logger's glitches, after the sampling; a channel with fewer values, as
-many fewer), and a minimal sidecar:
+many fewer), the columns `--hold` written in every row as their last value (a slower sensor, the 25 Hz camera, held
+by the logger between its samples), and a minimal sidecar:
 format, rig, experiment, payload, controller, mode, notes and locked joints, none of what our simulator adds
 (scenario, seed, control period). Same seed, same files. docs/diagnosis.md, "A case as another lab logs it", reports
 what the diagnosis made of seed-97 cases so re-written.
@@ -38,8 +39,8 @@ KEPT = ("format", "rig", "experiment", "payload_kg", "controller", "mode", "note
 
 def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: float = 0.02,
           drop: frozenset = frozenset(), seed: int = 0, jitter_s: float = 0.0, time_unit: str = "s",
-          filtered_noise: float = 0.0, filter_hz: float = 100.0, glitches: int = 0, glitch_size: float = 30.0
-          ) -> list[Path]:
+          filtered_noise: float = 0.0, filter_hz: float = 100.0, glitches: int = 0, glitch_size: float = 30.0,
+          hold: frozenset = frozenset()) -> list[Path]:
     """Write each recording of `src` to `out` as the module says; returns the CSV files written."""
     files = sorted(src.glob("*.csv"))
     if not files:
@@ -60,6 +61,7 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
         rows = rows[::every]
         if glitches:
             add_glitches(header, rows, meta["rig"], glitches, glitch_size, rng)
+        hold_last_values(header, rows, hold)
         keep = [i for i, name in enumerate(header) if name not in drop]
         with (out / path.name).open("w", newline="") as f:
             writer = csv.writer(f, lineterminator="\n")
@@ -115,6 +117,15 @@ def add_glitches(header: list[str], rows: list[list[str]], rig: str, count: int,
             rows[i][c] = repr(float(rows[i][c]) + size * declared * float(rng.choice((-1.0, 1.0))))
 
 
+def hold_last_values(header: list[str], rows: list[list[str]], hold: frozenset) -> None:
+    """Write each empty cell of the columns named in `hold` (in place) as the last value above it (none before the
+    first): a logger holding a slower sensor's value between its samples."""
+    for c in [i for i, name in enumerate(header) if name in hold]:
+        last = ""
+        for row in rows:
+            last = row[c] = row[c] or last
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("src", type=Path, help="folder of NAME.csv + NAME.json recordings (a benchmark case)")
@@ -135,6 +146,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="single samples of each measured channel moved, per recording (default 0: none)")
     parser.add_argument("--glitch-size", type=float, default=30.0,
                         help="how far each is moved, x the channel's declared noise (default 30)")
+    parser.add_argument("--hold", default="",
+                        help="columns written in every row as their last value, comma-separated (e.g. tip_x,tip_y: "
+                             "the 25 Hz camera held by a 1 kHz logger; default none)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the empty cells, the jitter, the noise and the glitches (default 0)")
     args = parser.parse_args(argv)
@@ -146,7 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         written = relog(args.src, args.out, args.every, args.start_s, args.empty,
                         frozenset(c for c in args.drop.split(",") if c), args.seed, args.jitter_s, args.time_unit,
-                        args.filtered_noise, args.filter_hz, args.glitches, args.glitch_size)
+                        args.filtered_noise, args.filter_hz, args.glitches, args.glitch_size,
+                        frozenset(c for c in args.hold.split(",") if c))
     except (OSError, ValueError, KeyError) as exc:
         print(f"relog: {exc}", file=sys.stderr)
         return 2

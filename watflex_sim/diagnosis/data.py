@@ -20,7 +20,7 @@ import numpy as np
 from ..model import ConfigError
 from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
-from .glitch import without_glitches
+from .glitch import without_glitches, without_held
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
 BLOCKS_PER_RECORDING = 60  # blocks per recording, in pairs of one training and one validation block (split_blocks):
@@ -84,6 +84,7 @@ class Data:
     # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
     motion_memo: list | None = None  # `motions`' answer, once asked
     glitches: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a logger's glitches left out
+    held: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a slower sensor's held repeats
 
     @property
     def noise_floor(self) -> list[dict[str, float]]:
@@ -236,7 +237,8 @@ def _noise(rig: RigDescription, rec: Recording, channel: str, estimate: float) -
 
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
     """Check the recordings share one rig and have comparable channels; order them canonically; leave out a
-    logger's glitches (glitch.without_glitches); split each into training and validation blocks; take each
+    logger's glitches (glitch.without_glitches) and the repeats of a slower sensor's values it held between them
+    (glitch.without_held, on channels not on a grid coarse against their noise); split each into training and validation blocks; take each
     channel's spread and noise."""
     rigs = {r.rig for r in recordings}
     if len(rigs) != 1:
@@ -248,14 +250,18 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     outputs, commands = set(rig.of_kind("measured")), set(rig.of_kind("command"))
     moved = [on_ticks(r, rig.period_of(r.meta)) for r in recordings]
     recordings = [r for r, _ in moved]
-    channels, scale, noise, train, blocks, cleaned, glitched = [], [], [], [], [], [], []
+    channels, scale, noise, train, blocks, cleaned, glitched, held = [], [], [], [], [], [], [], []
     for rec, name, fingerprint in zip(recordings, names, prints):
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         sensors, given = [c for c in rec.channels if c in outputs], [c for c in rec.channels if c in commands]
+        rec, repeats = without_held(rec, [c for c in sensors if grid_step(rec.channels[c]) / math.sqrt(12)
+                                          < QUANTUM_SHARE * _noise(rig, rec, c, measured_noise(rec.channels[c]))])
         rec, counts = without_glitches(rec, sensors, given, {  # an open loop's commands too: where a kick was
             c: _noise(rig, rec, c, measured_noise(rec.channels[c])) for c in sensors + given})
         cleaned.append(rec)
+        if repeats:
+            held.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in repeats.items()) + ")")
         if counts:
             glitched.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")")
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
@@ -278,10 +284,12 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
     jittered = [f"{name} by up to {m * 1e3:.2g} ms" for name, (_, m) in zip(names, moved) if m]
     if jittered:
         how += ("; time stamps moved onto the control loop's ticks (a logger's clock jitter): " + ", ".join(jittered))
+    if held:
+        how += f"; a slower sensor's values a logger held between its samples compared once: {', '.join(held)}"
     if glitched:
         how += f"; samples far off their neighbours' line left out (a logger's glitches): {', '.join(glitched)}"
     return Data(cleaned, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise],
-                glitches=glitched)
+                glitches=glitched, held=held)
 
 
 def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:

@@ -28,6 +28,9 @@ GLITCH_SHAPE = 0.2  # ... and every sample from two before it to two after it is
 
 RUNS = {1: (0.0, -0.5, 1.0, -0.5, 0.0), 2: (0.0, -0.5, 0.5, 0.5, -0.5, 0.0)}  # samples in a glitch -> how far
 # each sample from two before it to two after it is off its neighbours' mean, per unit the glitch moves them
+HELD_SHARE = 0.8  # held_samples: of a channel's runs of one repeated value (its first and last aside), this share
+# within a sample of their median length
+HELD_RUNS = 5  # ... and at least this many such runs
 
 
 def glitch_samples(values: np.ndarray, noise: float) -> np.ndarray:
@@ -57,10 +60,40 @@ def without_glitches(rec: Recording, measured: list[str], commands: list[str], n
     for c in commands:
         kicks |= glitch_samples(np.asarray(rec.channels[c], float), noise[c])
     kicks |= np.roll(kicks, 1) | np.roll(kicks, -1)
+    return emptied(rec, {c: glitch_samples(np.asarray(rec.channels[c], float), noise[c]) & ~kicks for c in measured})
+
+
+def without_held(rec: Recording, channels: list[str]) -> tuple[Recording, dict[str, int]]:
+    """`rec` with the held repeats (held_samples) of its `channels` made NaN, and the samples emptied on each."""
+    return emptied(rec, {c: held_samples(np.asarray(rec.channels[c], float)) for c in channels})
+
+
+def emptied(rec: Recording, masks: dict[str, np.ndarray]) -> tuple[Recording, dict[str, int]]:
+    """`rec` with each channel's `masks` samples made NaN and how many on each channel that has any; `rec` itself
+    where none has."""
     changed, counts = dict(rec.channels), {}
-    for c in measured:
-        alone = glitch_samples(np.asarray(rec.channels[c], float), noise[c]) & ~kicks
-        if alone.any():
-            changed[c] = np.where(alone, np.nan, rec.channels[c])
-            counts[c] = int(alone.sum())
+    for c, mask in masks.items():
+        if mask.any():
+            changed[c] = np.where(mask, np.nan, rec.channels[c])
+            counts[c] = int(mask.sum())
     return (Recording(rec.time, changed, rec.meta), counts) if counts else (rec, {})
+
+
+def held_samples(values: np.ndarray) -> np.ndarray:
+    """Mask of the samples of `values` that repeat the one before them exactly where a logger wrote a slower
+    sensor's last value in every row (a 25 Hz camera held through a 1 kHz log): the finite values come in runs of one
+    value of a common length (HELD_SHARE of the runs within a sample of their median length, at least 2, and
+    HELD_RUNS runs or more). The first sample of each run is the sensor's and is not in the mask. The caller asks it
+    of channels not on a grid coarse against their noise (an encoder at a steady speed repeats its counts as evenly)."""
+    out = np.zeros(values.shape, bool)
+    finite = np.flatnonzero(np.isfinite(values))
+    x = values[finite]
+    repeats = np.zeros(x.shape, bool)
+    repeats[1:] = x[1:] == x[:-1]
+    lengths = np.diff(np.append(np.flatnonzero(~repeats), x.size))[1:-1]  # the runs, the first and last aside
+    if lengths.size < HELD_RUNS:
+        return out
+    common = float(np.median(lengths))
+    if common >= 2 and np.mean(np.abs(lengths - common) <= 1) >= HELD_SHARE:
+        out[finite[repeats]] = True
+    return out

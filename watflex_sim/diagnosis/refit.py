@@ -65,6 +65,9 @@ class Refit:
 def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     """Re-simulate the nominal model and refit the rig's parameters within their tolerances (see the module's
     contract); `say(kind, message)` hears each stage."""
+    if data.held:
+        say("nominal", "a slower sensor's values a logger held between its samples, compared where they change: "
+            + ", ".join(data.held))
     if data.glitches:
         say("nominal", "left out as a logger's glitches (one or two samples far off their neighbours' line): "
             + ", ".join(data.glitches))
