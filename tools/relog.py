@@ -79,7 +79,7 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
 
 
 def noisy_columns(header: list[str], rig: str):
-    """(column index, declared noise rms in its unit) of each measured channel of `rig` in `header` that declares one."""
+    """(column index, declared noise rms in its unit) of each measured channel of `rig` in `header` declaring one."""
     description = load_rig(rig)
     for c, name in enumerate(header):
         spec = description.channels.get(name, {})

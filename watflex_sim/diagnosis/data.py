@@ -238,8 +238,8 @@ def _noise(rig: RigDescription, rec: Recording, channel: str, estimate: float) -
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
     """Check the recordings share one rig and have comparable channels; order them canonically; leave out a
     logger's glitches (glitch.without_glitches) and the repeats of a slower sensor's values it held between them
-    (glitch.without_held, on channels not on a grid coarse against their noise); split each into training and validation blocks; take each
-    channel's spread and noise."""
+    (glitch.without_held, on channels not on a grid coarse against their noise); split each into training and
+    validation blocks; take each channel's spread and noise."""
     rigs = {r.rig for r in recordings}
     if len(rigs) != 1:
         raise ConfigError(f"recordings of different rigs in one diagnosis: {', '.join(sorted(rigs))}")

@@ -1,5 +1,5 @@
 """A logger's glitches: one or two samples of one channel far off the line their neighbours lie on, which nothing
-sampled at the loop's rate does.
+sampled at the loop's rate does; and a slower sensor's values a logger held between its samples.
 
 Contract: `without_glitches(rec, measured, commands, noise)` returns the recording with every glitch of a measured
 channel made empty cells (NaN: compared nowhere, as a logger's missing samples) and how many samples it emptied on
@@ -13,6 +13,11 @@ derivative, its answer to a sensor's spike) is the rig's and kept; one that only
 logger's (a row written wrong). Seed 94's clean laser case with six single samples a recording moved by 30 x the
 noise on the tip sensor and the motor current (0.1 % of the samples) came out `unexplained` (motor current 1.47 x
 its noise, the residual's windows the glitches) in 265 s; docs/diagnosis.md, "A logger's glitches".
+
+`without_held(rec, channels)` returns the recording with the repeats of a channel whose values a logger wrote in
+every row between a slower sensor's samples (held_samples) made empty cells: the sensor's value compared once, at
+the sample it came. Seed 97's clean two-joint case with its 25 Hz camera so held through the 1 kHz log was read as a
+29,980 N m/rad elbow compliance; docs/diagnosis.md, "A slower sensor a logger held".
 """
 from __future__ import annotations
 

@@ -53,10 +53,10 @@ def pattern_polish(data: Data, runner: Runner, model: Model, sims: list[Recordin
     """The final model (`what` the progress calls it; its findings' and the rig's parameters) carried on by the
     pattern search on the training blocks where it is short of the noise but near it (compass_worth), kept if
     validation is no worse: with the floors calibrated, as the refit before them, a closed loop that sticks and hunts
-    makes the cost rough and Levenberg-Marquardt stops short. Seed 83's two-joint watflex-490a4521, an 11 ms command delay found to the
-    millisecond with the elbow inertia at x1.010 (truth x1.028): training 1.47 x the noise, validation 1.87 x with the
-    elbow encoder at 3.41 x, `unexplained`; carried on, it stops within the noise at 0.94 x and 1.04 x, the elbow
-    inertia x1.029 (searched to its end: 0.78 x and 0.84 x)."""
+    makes the cost rough and Levenberg-Marquardt stops short. Seed 83's two-joint watflex-490a4521, an 11 ms command
+    delay found to the millisecond with the elbow inertia at x1.010 (truth x1.028): training 1.47 x the noise,
+    validation 1.87 x with the elbow encoder at 3.41 x, `unexplained`; carried on, it stops within the noise at 0.94 x
+    and 1.04 x, the elbow inertia x1.029 (searched to its end: 0.78 x and 0.84 x)."""
     train, held = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
     if within_noise(train, held) or not compass_worth(train):
         return model, sims
