@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from watflex_sim.diagnosis.data import QUANTUM_SHARE, grid_step
+from watflex_sim.diagnosis.data import quantised
 from watflex_sim.rigdesc import load_rig
 
 TIME_UNITS = {"s": (1.0, 7), "ms": (1e3, 4)}  # unit -> (its count per s, decimals written: 0.1 us either way)
@@ -97,7 +97,7 @@ def add_filtered_noise(header: list[str], rows: list[list[str]], rig: str, times
     a = float(np.exp(-2 * np.pi * filter_hz * dt))
     for c, declared in noisy_columns(header, rig):
         values = np.array([float(r[c]) if r[c] else np.nan for r in rows])
-        if grid_step(values) / np.sqrt(12) >= QUANTUM_SHARE * times * declared:  # an encoder's counts
+        if quantised(values, times * declared):  # an encoder's counts
             continue
         noise = times * declared * lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(len(rows)))
         for row, value, extra in zip(rows, values, noise):

@@ -146,6 +146,12 @@ def grid_step(values: np.ndarray) -> float:
     return float(change.min()) if np.all(np.abs(steps - np.round(steps)) < 0.01) else 0.0
 
 
+def quantised(values: np.ndarray, noise: float) -> bool:
+    """Whether `values` lie on a grid coarse against `noise` (their unit): the grid's rms step (step / sqrt(12)) at
+    least QUANTUM_SHARE x it (an encoder's counts, a 12-bit converter's least bit)."""
+    return grid_step(values) / math.sqrt(12) >= QUANTUM_SHARE * noise
+
+
 def coloured_noise(residual: np.ndarray, dt: float) -> float:
     """The rms of noise correlated over a few samples (a sensor's anti-alias filter, an amplifier's bandwidth),
     measured on a model's residual (its unit; `dt` the sample spacing, s), or 0 where the residual shows none.
@@ -235,6 +241,11 @@ def _noise(rig: RigDescription, rec: Recording, channel: str, estimate: float) -
     return max(float(rig.channels[channel].get("noise", 0.0)), estimate) or NO_NOISE_FLOOR * float(np.nanstd(values))
 
 
+def _counted(name: str, counts: dict[str, int]) -> str:
+    """"file (channel samples, ...)": what prepare left out of a recording, as its progress and description say."""
+    return f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")"
+
+
 def prepare(recordings: list[Recording], names: list[str]) -> Data:
     """Check the recordings share one rig and have comparable channels; order them canonically; leave out a
     logger's glitches (glitch.without_glitches) and the repeats of a slower sensor's values it held between them
@@ -255,15 +266,13 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         if rec.time[-1] - rec.time[0] < MIN_SPAN_S:
             raise ConfigError(f"{name}: recording shorter than {MIN_SPAN_S * 1e3:g} ms, too short to simulate")
         sensors, given = [c for c in rec.channels if c in outputs], [c for c in rec.channels if c in commands]
-        rec, repeats = without_held(rec, [c for c in sensors if grid_step(rec.channels[c]) / math.sqrt(12)
-                                          < QUANTUM_SHARE * _noise(rig, rec, c, measured_noise(rec.channels[c]))])
+        rec, repeats = without_held(rec, [c for c in sensors if not quantised(
+            rec.channels[c], _noise(rig, rec, c, measured_noise(rec.channels[c])))])
         rec, counts = without_glitches(rec, sensors, given, {  # an open loop's commands too: where a kick was
             c: _noise(rig, rec, c, measured_noise(rec.channels[c])) for c in sensors + given})
         cleaned.append(rec)
-        if repeats:
-            held.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in repeats.items()) + ")")
-        if counts:
-            glitched.append(f"{name} (" + ", ".join(f"{c} {n}" for c, n in counts.items()) + ")")
+        held += [_counted(name, repeats)] if repeats else []
+        glitched += [_counted(name, counts)] if counts else []
         closed = rec.meta.get("mode", "closed_loop") != "open_loop"
         wanted = outputs | (commands if closed else set())
         chans = [c for c in rec.channels if c in wanted and np.isfinite(rec.channels[c]).sum() > 10
@@ -309,7 +318,7 @@ def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:
                 continue
             noise = coloured_noise(residual[finite], float(np.median(np.diff(rec.time[finite]))))
             if (noise > PLATEAU * data.sensor_noise[i][c]  # then whether quantised: the step's rms error, its unit
-                    and grid_step(rec.channels[c]) / math.sqrt(12) < QUANTUM_SHARE * noise):
+                    and not quantised(rec.channels[c], noise)):
                 raised.append(f"{data.names[i]}: {c} x{noise / data.sensor_noise[i][c]:.2f}")
                 data.sensor_noise[i][c] = noise
                 data.noise[i][c] = max(data.noise[i][c], noise)
