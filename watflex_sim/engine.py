@@ -280,9 +280,11 @@ class ControlLoop:
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
         self.rig = description.make_sensors(self.model, self.data, scenario, period)
-        if scenario.get("initial"):  # start where a recording starts (generic rigs)
-            if not hasattr(self.rig, "start_at"):
-                raise ConfigError(f"rig {rig_name!r} cannot start from recorded values (its sensors are not generic)")
+        if scenario.get("initial"):  # start where a recording starts
+            unknown = sorted(set(scenario["initial"]) - set(description.start_channels()))
+            if unknown:
+                raise ConfigError(f"initial: rig {rig_name!r} cannot start from {', '.join(unknown)} "
+                                  f"(it starts from {', '.join(description.start_channels())})")
             self.rig.start_at(scenario["initial"])
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0

@@ -35,8 +35,8 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
     for key in ("tilt_rad", "actuator_bench", "friction", "joint_friction", "timestep"):
         if key in meta.get("scenario", {}):  # our own recordings say how they were made
             scenario[key] = meta["scenario"][key]
-    if description.sensors == "generic":  # start where the recording starts (its first finite samples)
-        scenario["initial"] = {c: _first(rec.channels[c]) for c in description.of_kind("measured") if c in rec.channels}
+    # start where the recording starts (its first finite samples): a generic rig's sensors, the others' encoders
+    scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels}
     inputs = [c for c in description.of_kind("reference") + description.of_kind("disturbance") if c in rec.channels]
     scenario["reference"] = [_samples(c, time, rec.channels[c]) for c in inputs]
     mode = meta.get("mode", "closed_loop")

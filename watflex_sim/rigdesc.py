@@ -87,6 +87,15 @@ class RigDescription:
     def of_kind(self, kind: str) -> list[str]:
         return [c for c, spec in self.channels.items() if spec["kind"] == kind]
 
+    def start_channels(self) -> list[str]:
+        """The measured channels whose first samples a run can start from (scenario `initial`): a generic rig's
+        every one; the laser arm's and Watflex's encoders (rigs.py)."""
+        if self.sensors == "generic":
+            return self.of_kind("measured")
+        from .rigs import LaserArmRig, WatflexRig
+
+        return list((WatflexRig if self.sensors == "watflex" else LaserArmRig).encoders)
+
     def parameter_knobs(self) -> dict[str, tuple[str, str]]:
         """name -> (knob, target), for effects.apply_parameters."""
         return {n: (p["knob"], p["target"]) for n, p in self.parameters.items()}

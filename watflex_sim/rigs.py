@@ -57,6 +57,7 @@ class Rig:
     command_actuators: dict[str, int]  # command channel -> actuator id
     command_scale: dict[str, float] = {}  # command channel -> actuator input per command unit (1 if absent)
     positions_every = 1  # observe() reads body/site positions (not just qpos) on ticks that are multiples of this; 0: never
+    encoders: dict[str, str] = {}  # encoder channel -> the joint it reads: where start_at can start a run
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, params, noise: bool, seed: int):
         self.model, self.data, self.p = model, data, params
@@ -83,6 +84,19 @@ class Rig:
         """Channels measured on the actuators once the commands are applied (none by default)."""
         return {}
 
+    def start_at(self, first: dict[str, float]) -> None:
+        """Start each encoder's joint at its value in `first` (channel -> rad), at rest, the links straight: a
+        recording that starts away from the nominal pose. A joint within half an encoder count of it stays as it
+        is (bit for bit); a locked joint, a missing or non-finite value are left alone."""
+        moved = False
+        for channel, joint in self.encoders.items():
+            q, value = self._qpos(joint), first.get(channel, math.nan)
+            if q is not None and math.isfinite(value) and abs(self.data.qpos[q] - value) > 0.5 * self.p.encoder_step:
+                self.data.qpos[q] = value
+                moved = True
+        if moved:
+            mujoco.mj_forward(self.model, self.data)
+
     def _qpos(self, joint: str) -> int | None:
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
         return None if jid < 0 else int(self.model.jnt_qposadr[jid])
@@ -98,6 +112,7 @@ class LaserArmRig(Rig):
     name = "laser_arm"
     channels = ("reference", "hub_angle", "tip_sensor", "voltage_cmd", "motor_current")
     command_channels = ("voltage_cmd",)
+    encoders = {"hub_angle": "hub"}
 
     def __init__(self, model, data, params: LaserArm, noise: bool, seed: int):
         super().__init__(model, data, params, noise, seed)
@@ -159,6 +174,7 @@ class WatflexRig(Rig):
     )
     command_channels = ("shoulder_torque_cmd", "elbow_torque_cmd")
     joints = ("shoulder", "elbow")
+    encoders = {"shoulder_angle": "shoulder", "elbow_angle": "elbow"}
 
     def __init__(self, model, data, params: Watflex, noise: bool, seed: int, locked: dict[str, float] | None = None):
         super().__init__(model, data, params, noise, seed)

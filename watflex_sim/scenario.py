@@ -35,7 +35,7 @@ DEFAULTS = {
     "effects": [],  # catalogue effects added to the nominal model (effects.py, recordings.md)
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
     "control_period_s": 0.0,  # s, sample period of sensors and controller; 0 = the rig's (rigs/<rig>.toml)
-    "initial": {},  # channel -> first recorded value: the run starts in that state (generic rigs)
+    "initial": {},  # channel -> value: the run starts in that state (the laser arm's and Watflex's encoders, rad)
     "notes": "",
 }
 
