@@ -394,7 +394,8 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     over ~2), correlated from sample to sample as a 100 Hz first-order low-pass at 1 kHz (0.53, within 0.15); the
     encoder, quantised, is left as it was. With --glitches 3 three cells of each measured channel move, each by
     --glitch-size 30 x its declared noise; a negative count is refused. --hold writes a column's empty cells as its
-    last value above them (none before its first) and leaves the others' empty."""
+    last value above them (none before its first) and leaves the others' empty; --hold or --drop of a column the
+    recordings lack is refused before anything is written."""
     from watflex_sim import load_scenario, simulate, write_recording
 
     spec = importlib.util.spec_from_file_location("relog", ROOT / "tools" / "relog.py")
@@ -437,3 +438,6 @@ def test_relog_writes_a_recording_as_another_lab_logs_it(tmp_path):
     rows = [["0", "", "5"], ["1", "2", ""], ["2", "", ""], ["3", "4", "6"], ["4", "", ""]]
     relog.hold_last_values(["time", "tip_x", "tip_y"], rows, frozenset({"tip_x"}))  # --hold tip_x
     assert [r[1] for r in rows] == ["", "2", "2", "4", "4"] and [r[2] for r in rows] == ["5", "", "", "6", ""]
+    for option in ("--hold", "--drop"):  # a column the recordings do not have: refused, nothing written
+        assert relog.main([str(tmp_path / "src"), str(tmp_path / "h"), option, "tip_sensor,tip_x"]) == 2
+        assert not (tmp_path / "h").exists()
