@@ -285,7 +285,7 @@ class ControlLoop:
             if unknown:
                 raise ConfigError(f"initial: rig {rig_name!r} cannot start from {', '.join(unknown)} "
                                   f"(it starts from {', '.join(description.start_channels())})")
-            self.rig.start_at(scenario["initial"])
+            self.rig.start_at(self._true_values(scenario["initial"]))
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(scenario_frictions(description, scenario), patch.friction, patch.friction_add)
@@ -368,6 +368,16 @@ class ControlLoop:
         """Before physics substep j of a tick: the new plant input arrives if it is due (jitter)."""
         if j == self._due and j:
             self.data.ctrl[:] = self._applied
+
+    def _true_values(self, readings: dict[str, float]) -> dict[str, float]:
+        """What the rig's own sensors would read (channel -> value) where the sensor gain and offset effects make
+        them read `readings`: a run started at a recording's first samples with an encoder offset in the model
+        starts where that offset puts the joint, not at the reading."""
+        out = dict(readings)
+        for channel, (gain, offset) in self.patch.sensor.items():
+            if channel in out and gain:
+                out[channel] = (out[channel] - offset) / gain
+        return out
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
         """Sensor gain/offset and delay effects on the measured channels."""
