@@ -2,15 +2,19 @@
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 
+from .effects import CATALOGUE
 from .engine import SimulationError, simulate
 from .lockstep import simulate_batch
 from .model import ConfigError, load_model
 from .recording import Recording
 from .rigdesc import RigDescription, load_rig
 from .scenario import DEFAULTS, check
+
+OFFSET_REACH = CATALOGUE["sensor_offset"][1][0].high  # x a channel's spread: the largest sensor offset fitted
 
 
 def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -> dict:
@@ -35,8 +39,10 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
     for key in ("tilt_rad", "actuator_bench", "friction", "joint_friction", "timestep"):
         if key in meta.get("scenario", {}):  # our own recordings say how they were made
             scenario[key] = meta["scenario"][key]
-    # start where the recording starts (its first finite samples): a generic rig's sensors, the others' encoders
-    scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels}
+    # start where the recording starts (its first finite samples): a generic rig's every sensor; the laser arm's and
+    # Watflex's encoders where they read further from the nominal pose than an offset would (_away_from_nominal)
+    scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels
+                           and (description.sensors == "generic" or _away_from_nominal(rec.channels[c]))}
     inputs = [c for c in description.of_kind("reference") + description.of_kind("disturbance") if c in rec.channels]
     scenario["reference"] = [_samples(c, time, rec.channels[c]) for c in inputs]
     mode = meta.get("mode", "closed_loop")
@@ -50,6 +56,14 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
     else:
         scenario["controller"] = controller
     return check(scenario)
+
+
+def _away_from_nominal(values: np.ndarray) -> bool:
+    """Whether an encoder's first reading is further from the nominal pose (0 rad) than the largest sensor offset the
+    diagnosis fits (OFFSET_REACH x the channel's spread): the arm started there. Nearer, the run starts at the nominal
+    pose and the reading is an offset to find, as a rig started at its nominal pose shows one."""
+    first = _first(values)
+    return math.isfinite(first) and abs(first) > OFFSET_REACH * float(np.nanstd(values))
 
 
 def _first(values: np.ndarray) -> float:
