@@ -109,16 +109,14 @@ def run(s: dict, start_xy: tuple[float, float] | None = None, pulse: Pulse | Non
     """Run scenario `s` through ControlLoop; `start_xy` (m) puts the rigid arm's end effector
     there at rest before the first period, `pulse` (a Pulse or any t -> (fx, fy) in N) pushes
     the end effector, `controller` replaces the scenario's."""
+    if start_xy is not None:
+        th1, th2 = ESTIMATOR.rigid_inverse(*start_xy, ELBOW_SIGN)
+        s = check(dict(s, initial={"shoulder_angle": th1, "elbow_angle": th2}))  # rad: at rest there
     loop = ControlLoop(s)
     if controller is not None:
         loop.controller = controller
         controller.reset()
     model, data = loop.model, loop.data
-    if start_xy is not None:
-        th1, th2 = ESTIMATOR.rigid_inverse(*start_xy, ELBOW_SIGN)
-        data.qpos[model.joint("shoulder").qposadr[0]] = th1
-        data.qpos[model.joint("elbow").qposadr[0]] = th2
-        mujoco.mj_forward(model, data)
     tip = data.site("tip").xpos
     elbow_body = data.body("elbow_housing")
     ee = model.body("end_effector").id
