@@ -25,7 +25,7 @@ def _on_counts(angle: float, step: float) -> float:
 
 def _two_joint(start: tuple[float, float], move: tuple[float, float], locked: bool = False) -> dict:
     """Observer control of both joints (or the elbow alone, shoulder locked) from `start` (rad), steps of
-    `move` (rad) at 0.2 s, 0.8 s, noise off."""
+    `move` (rad) at 0.2 s, 0.8 s long, noise off."""
     sc = copy.deepcopy(load_scenario("watflex_observer_two_joint"))
     s = [_on_counts(a, WATFLEX.encoder_step) for a in start]
     names = ("shoulder", "elbow")
@@ -60,7 +60,8 @@ CASES = {
 def test_a_recording_that_starts_away_from_the_nominal_pose_is_resimulated_from_there(case):
     """The recording of a run started at a pose, re-simulated from its own first samples (resim), gives every
     channel back bit for bit (the same physics from the same state; start angles on encoder counts, else the
-    re-simulation starts up to half a count away). Started from the nominal pose instead (as before), its angles
+    re-simulation starts up to half a count away; each further from 0 than an offset would be, 0.5 x its channel's
+    spread: resim._away_from_nominal). Started from the nominal pose instead (as before), its angles
     are off by about the whole start pose: NRMSE > 0.3 on every encoder (measured 1.05-203)."""
     rec = simulate(CASES[case]()).recording
     again = resimulate(rec)
