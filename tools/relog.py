@@ -51,7 +51,8 @@ def relog(src: Path, out: Path, every: int = 2, start_s: float = 100.0, empty: f
             columns.update(next(csv.reader(f), []))
     unknown = sorted((drop | hold) - columns)
     if unknown:  # before anything is written
-        raise ValueError(f"{src}: no column {', '.join(unknown)} in its recordings (columns: {', '.join(sorted(columns))})")
+        raise ValueError(f"{src}: no column {', '.join(unknown)} in its recordings "
+                         f"(columns: {', '.join(sorted(columns))})")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     scale, decimals = TIME_UNITS[time_unit]
