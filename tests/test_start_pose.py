@@ -103,12 +103,12 @@ def test_a_watflex_run_started_at_a_pose_rests_there_with_its_tip_where_rigid_ki
     np.testing.assert_allclose([rec.channels["tip_x"][0], rec.channels["tip_y"][0]], expected, atol=1e-6)
 
 
-def test_a_start_from_a_channel_that_is_not_an_encoder_is_bad_input():
-    """The laser arm and the Watflex start from their encoders only (their links straight): a strain is refused
-    with a one-line error naming what they start from."""
+def test_a_start_from_a_channel_the_rig_cannot_start_from_is_bad_input():
+    """The Watflex starts from its encoders and strain bridges: its camera is refused with a one-line error naming
+    what it starts from."""
     sc = _two_joint((0.3, -0.5), (0.0, 0.0))
-    sc["initial"]["strain_2A"] = 0.1
-    with pytest.raises(ConfigError, match="cannot start from strain_2A .*shoulder_angle, elbow_angle"):
+    sc["initial"]["tip_x"] = 0.1
+    with pytest.raises(ConfigError, match="cannot start from tip_x .*shoulder_angle, elbow_angle, strain_1A"):
         simulate(sc)
 
 

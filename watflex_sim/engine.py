@@ -280,12 +280,17 @@ class ControlLoop:
         mujoco.mj_forward(self.model, self.data)
         _settle_bearings(self.model, self.data)
         self.rig = description.make_sensors(self.model, self.data, scenario, period)
-        if scenario.get("initial"):  # start where a recording starts
-            unknown = sorted(set(scenario["initial"]) - set(description.start_channels()))
+        initial, rates = scenario.get("initial") or {}, scenario.get("initial_rate") or {}
+        if initial or rates:  # start where a recording starts
+            unknown = sorted((set(initial) | set(rates)) - set(description.start_channels()))
             if unknown:
                 raise ConfigError(f"initial: rig {rig_name!r} cannot start from {', '.join(unknown)} "
                                   f"(it starts from {', '.join(description.start_channels())})")
-            self.rig.start_at(self._true_values(scenario["initial"]))
+            period = description.period_of(scenario)  # s
+            inputs = {c: (float(f(0.0)), (float(f(period)) - float(f(0.0))) / period)
+                      for c, f in _references(scenario, description).items()}  # the references where the run starts
+            self.rig.start_at({**{c: v for c, (v, _) in inputs.items()}, **self._true_values(initial)},
+                              {**{c: r for c, (_, r) in inputs.items()}, **self._true_rates(rates)})
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(scenario_frictions(description, scenario), patch.friction, patch.friction_add)
@@ -378,6 +383,11 @@ class ControlLoop:
             if channel in out and gain:
                 out[channel] = (out[channel] - offset) / gain
         return out
+
+    def _true_rates(self, rates: dict[str, float]) -> dict[str, float]:
+        """As `_true_values` for rates of change (unit/s): the sensor gain effects inverted."""
+        return {c: r / self.patch.sensor[c][0] if self.patch.sensor.get(c, (0.0, 0.0))[0] else r
+                for c, r in rates.items()}
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
         """Sensor gain/offset and delay effects on the measured channels."""

@@ -15,6 +15,9 @@ from .rigdesc import RigDescription, load_rig
 from .scenario import DEFAULTS, check
 
 OFFSET_REACH = CATALOGUE["sensor_offset"][1][0].high  # x a channel's spread: the largest sensor offset fitted
+START_WINDOW_S = 0.02  # s: a recording's first samples, through which a parabola gives its start's values and rates
+START_SAMPLES = 6  # ... at least this many
+MOVING_SD = 5.0  # a sensor's rate this many standard errors from 0 at the first sample: the arm was moving
 
 
 def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -> dict:
@@ -40,9 +43,16 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
         if key in meta.get("scenario", {}):  # our own recordings say how they were made
             scenario[key] = meta["scenario"][key]
     # start where the recording starts (its first finite samples): a generic rig's every sensor; the laser arm's and
-    # Watflex's encoders where they read further from the nominal pose than an offset would (_away_from_nominal)
-    scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels
-                           and (description.sensors == "generic" or _away_from_nominal(rec.channels[c]))}
+    # Watflex's encoders where they read further from the nominal pose than an offset would (_away_from_nominal);
+    # where it starts moving, every sensor the rig starts from, at the value and rate its first samples give
+    starts = {c: _start(rec.time, rec.channels[c]) for c in description.start_channels() if c in rec.channels}
+    if any(_moving(rec.channels[c], *starts[c]) for c in starts):
+        scenario["initial"] = {c: value for c, (value, _rate, _sd) in starts.items() if math.isfinite(value)}
+        scenario["initial_rate"] = {c: rate for c, (_value, rate, _sd) in starts.items() if math.isfinite(rate)}
+    else:
+        scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels
+                               and (description.sensors == "generic" or c in description.position_channels()
+                                    and _away_from_nominal(rec.channels[c]))}
     inputs = [c for c in description.of_kind("reference") + description.of_kind("disturbance") if c in rec.channels]
     scenario["reference"] = [_samples(c, time, rec.channels[c]) for c in inputs]
     mode = meta.get("mode", "closed_loop")
@@ -64,6 +74,31 @@ def _away_from_nominal(values: np.ndarray) -> bool:
     pose and the reading is an offset to find, as a rig started at its nominal pose shows one."""
     first = _first(values)
     return math.isfinite(first) and abs(first) > OFFSET_REACH * float(np.nanstd(values))
+
+
+def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float]:
+    """(value, rate, the rate's standard error) at a channel's first finite sample (unit, unit/s), from a parabola
+    through its samples in the first START_WINDOW_S (at least START_SAMPLES); NaNs where it has too few."""
+    finite = np.flatnonzero(np.isfinite(values))
+    if finite.size < START_SAMPLES:
+        return math.nan, math.nan, math.nan
+    t = time[finite] - time[finite[0]]
+    take = finite[: max(START_SAMPLES, int(np.searchsorted(t, START_WINDOW_S, side="right")))]
+    t, y = time[take] - time[take[0]], values[take]
+    design = np.vander(t, 3, increasing=True)  # 1, t, t^2
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    variance = float(np.sum((y - design @ coef) ** 2)) / (len(y) - 3)
+    sd = math.sqrt(variance * np.linalg.inv(design.T @ design)[1, 1])
+    return float(coef[0]), float(coef[1]), sd
+
+
+def _moving(values: np.ndarray, _value: float, rate: float, sd: float) -> bool:
+    """Whether a sensor's rate at its first sample says the arm was moving when the recording began: MOVING_SD
+    standard errors from rest, and a change over START_WINDOW_S of more than two of its steps (the smallest change
+    between its samples)."""
+    change = np.abs(np.diff(values[np.isfinite(values)]))
+    step = float(change[change > 0].min()) if np.any(change > 0) else 0.0
+    return math.isfinite(rate) and abs(rate) > MOVING_SD * sd and abs(rate) * START_WINDOW_S > 2 * step
 
 
 def _first(values: np.ndarray) -> float:

@@ -88,10 +88,19 @@ class RigDescription:
         return [c for c, spec in self.channels.items() if spec["kind"] == kind]
 
     def start_channels(self) -> list[str]:
-        """The measured channels whose first samples a run can start from (scenario `initial`): a generic rig's
-        every one; the laser arm's and Watflex's encoders (rigs.py)."""
+        """The measured channels whose first samples a run can start from (scenario `initial`, `initial_rate`): a
+        generic rig's every one; the laser arm's and Watflex's encoders, the laser arm's tip sensor and the Watflex's strain
+        bridges (rigs.py: these two where a run starts moving)."""
         if self.sensors == "generic":
             return self.of_kind("measured")
+        return self.position_channels() + (["tip_sensor"] if self.sensors == "laser_arm" else
+                                           [c for c in self.channels if c.startswith("strain_")])
+
+    def position_channels(self) -> list[str]:
+        """The measured channels that read a joint's position: a generic rig's `position` ones, the built-in rigs'
+        encoders (rigs.py)."""
+        if self.sensors == "generic":
+            return [c for c in self.of_kind("measured") if self.channels[c].get("quantity", "position") == "position"]
         from .rigs import LaserArmRig, WatflexRig
 
         return list((WatflexRig if self.sensors == "watflex" else LaserArmRig).encoders)

@@ -84,15 +84,19 @@ class Rig:
         """Channels measured on the actuators once the commands are applied (none by default)."""
         return {}
 
-    def start_at(self, first: dict[str, float]) -> None:
-        """Start each encoder's joint at its value in `first` (channel -> rad), at rest, the links straight: a
-        recording that starts away from the nominal pose. A joint within half an encoder count of it stays as it
-        is (bit for bit); a locked joint, a missing or non-finite value are left alone."""
-        moved = False
+    def start_at(self, first: dict[str, float], rates: dict[str, float] | None = None) -> None:
+        """Start each encoder's joint at its value in `first` (channel -> rad) and at its rate in `rates` (rad/s; at
+        rest without one), the links straight: a recording that starts away from the nominal pose, or moving. A joint
+        within half an encoder count of it stays as it is (bit for bit); a locked joint, a missing or non-finite
+        value are left alone."""
+        moved, rates = False, rates or {}
         for channel, joint in self.encoders.items():
             q, value = self._qpos(joint), first.get(channel, math.nan)
             if q is not None and math.isfinite(value) and abs(self.data.qpos[q] - value) > 0.5 * self.p.encoder_step:
                 self.data.qpos[q] = value
+                moved = True
+            if q is not None and math.isfinite(rates.get(channel, math.nan)) and rates[channel] != 0.0:
+                self.data.qvel[self._dof(joint)] = rates[channel]
                 moved = True
         if moved:
             mujoco.mj_forward(self.model, self.data)
@@ -123,6 +127,33 @@ class LaserArmRig(Rig):
         self._tip_noise = self.noise * params.noise_tip_sensor
         self._current_noise = self.noise * params.noise_current
         self._applied = 0.0
+
+    def start_at(self, first: dict[str, float], rates: dict[str, float] | None = None) -> None:
+        """As Rig.start_at, and where `first` has the tip sensor (V) (a run that starts moving), the beam in its
+        static tip-load shape with the tip deflection, and its rate, that make the sensor read it and its rate
+        (`rates`, V/s) against the reference then (`first`/`rates` of `reference`, rad and rad/s)."""
+        super().start_at(first, rates)
+        rates, tip = rates or {}, first.get("tip_sensor", math.nan)
+        if self._hub_q is None or not math.isfinite(tip) or abs(tip) >= self.p.sensor_limit:
+            return
+        gain, length = self.p.sensor_gain, self._length
+        deflection = length * first.get("reference", 0.0) - tip / gain - length * self.data.qpos[self._hub_q]  # m
+        speed = (length * rates.get("reference", 0.0) - rates.get("tip_sensor", 0.0) / gain
+                 - length * self.data.qvel[self._hub_v])  # m/s
+        hinges = self._beam_hinges()
+        norm = sum(arm * arm for _q, _v, arm in hinges)
+        for q, v, arm in hinges:  # w(L) = sum q_i (L - x_i), q_i proportional to the tip load's moment (L - x_i)
+            self.data.qpos[q], self.data.qvel[v] = deflection * arm / norm, speed * arm / norm
+        mujoco.mj_forward(self.model, self.data)
+
+    def _beam_hinges(self) -> list[tuple[int, int, float]]:
+        """(qpos address, dof address, distance to the tip sensor's point, m) of each beam hinge, the beam straight."""
+        straight = mujoco.MjData(self.model)
+        mujoco.mj_kinematics(self.model, straight)
+        hub = straight.xanchor[self.model.joint("hub").id]
+        ids = [j for j in range(self.model.njnt) if self.model.joint(j).name.startswith("beam_j")]
+        return [(int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]),
+                 self._length - float(np.linalg.norm(straight.xanchor[j] - hub))) for j in ids]
 
     def hub_velocity(self) -> float:
         """Hub speed (rad/s); 0 when the hub is locked."""
@@ -207,6 +238,33 @@ class WatflexRig(Rig):
         self._draw_bodies = np.array(
             [b for b in range(1, model.nbody) if not model.body(b).name.startswith("link2_root")]
         )
+
+    def start_at(self, first: dict[str, float], rates: dict[str, float] | None = None) -> None:
+        """As Rig.start_at, and where `first` has strain bridges (V) (a run that starts moving), each link with one
+        bent in its static tip-load shape (hinge i's angle proportional to L - x_i), its amplitude and rate the
+        least-squares fit of its bridges' readings and rates (`rates`, V/s)."""
+        super().start_at(first, rates)
+        rates, bent = rates or {}, False
+        for link in (1, 2):
+            beam, n = (self.p.link1 if link == 1 else self.p.link2), self.p.n_segments
+            hinges = {self._qpos(f"link{link}_j{i:02d}"): beam.length * (1 - (i - 0.5) / n) for i in range(1, n + 1)}
+            hinges.pop(None, None)  # a rigid link 1 (the single-link set-up) has none
+            gauges = [(first[c], rates.get(c, 0.0), va * hinges.get(qa, 0.0) + vb * hinges.get(qb, 0.0))
+                      for c, qa, qb, va, vb in self._gauges if qa in hinges and math.isfinite(first.get(c, math.nan))]
+            norm = sum(g * g for _v, _r, g in gauges)
+            if not norm:
+                continue
+            size = sum(v * g for v, _r, g in gauges) / norm  # rad per m of lever
+            speed = sum(r * g for _v, r, g in gauges) / norm if all(math.isfinite(r) for _v, r, _g in gauges) else 0.0
+            for q, arm in hinges.items():
+                self.data.qpos[q], self.data.qvel[self._dof_of_qpos(q)] = size * arm, speed * arm
+            bent = True
+        if bent:
+            mujoco.mj_forward(self.model, self.data)
+
+    def _dof_of_qpos(self, q: int) -> int:
+        """The dof address of the joint at qpos address q (a hinge)."""
+        return int(self.model.jnt_dofadr[list(self.model.jnt_qposadr).index(q)])
 
     def _gauge_weights(self, link: int, x_gauge: float):
         """Curvature at x_gauge (1/m) = wa q_a + wb q_b over the two nearest hinges (linear inter/extrapolation).
@@ -399,21 +457,27 @@ class GenericRig(Rig):
             y.pop()
         return out
 
-    def start_at(self, first: dict[str, float]) -> None:
-        """Set the state so the sensors read `first` (channel -> value; noise, filter and steps aside):
-        joint positions and velocities, and each link bent in its static tip-load shape."""
+    def start_at(self, first: dict[str, float], rates: dict[str, float] | None = None) -> None:
+        """Set the state so the sensors read `first` (channel -> value; noise, filter and steps aside) and change
+        at `rates` (channel -> unit/s; at rest without one): joint positions and velocities, and each link bent
+        in its static tip-load shape."""
+        rates = rates or {}
+        dof = {int(a): int(d) for a, d in zip(self.model.jnt_qposadr, self.model.jnt_dofadr)}  # qpos -> dof address
         for channel, kind, index, scale, offset, _step, _noise, _alpha in self._measured:
             if channel not in first or not math.isfinite(first[channel]) or kind == "current":
                 continue
             x = (first[channel] - offset) / scale
+            rate = rates.get(channel, 0.0) / scale if math.isfinite(rates.get(channel, 0.0)) else 0.0
             if kind == "position":
                 self.data.qpos[index] = x
+                self.data.qvel[dof[index]] = rate if rate else self.data.qvel[dof[index]]
             elif kind == "velocity":
                 self.data.qvel[index] = x
             else:  # q_i = c w_i with sum w_i q_i = x: the least-norm shape, a tip-load shape for a chain
                 norm = sum(w * w for _q, w in index)
                 for q, w in index:
                     self.data.qpos[q] = x * w / norm
+                    self.data.qvel[dof[q]] = rate * w / norm if rate else self.data.qvel[dof[q]]
         mujoco.mj_forward(self.model, self.data)
 
     def actuate(self, command: dict[str, float]) -> dict[str, float]:

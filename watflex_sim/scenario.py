@@ -36,6 +36,7 @@ DEFAULTS = {
     "parameters": {},  # refit parameters: name -> ratio to nominal (effects.py knobs)
     "control_period_s": 0.0,  # s, sample period of sensors and controller; 0 = the rig's (rigs/<rig>.toml)
     "initial": {},  # channel -> value: the run starts in that state (the laser arm's and Watflex's encoders, rad)
+    "initial_rate": {},  # channel -> its rate of change (unit/s): the run starts moving (rigs.Rig.start_at)
     "notes": "",
 }
 
@@ -195,8 +196,9 @@ def check(scenario: dict) -> dict:
     period = scenario["control_period_s"]
     if isinstance(period, bool) or not isinstance(period, (int, float)) or not (0 <= period <= 1.0):
         raise ConfigError(f"control_period_s must be 0 (the rig's) or a number of seconds in (0, 1], got {period!r}")
-    if not isinstance(scenario["initial"], dict):
-        raise ConfigError("initial must be a table channel = value")
+    for key, what in (("initial", "value"), ("initial_rate", "rate (unit/s)")):
+        if not isinstance(scenario[key], dict):
+            raise ConfigError(f"{key} must be a table channel = {what}")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):
