@@ -89,8 +89,8 @@ class RigDescription:
 
     def start_channels(self) -> list[str]:
         """The measured channels whose first samples a run can start from (scenario `initial`, `initial_rate`): a
-        generic rig's every one; the laser arm's and Watflex's encoders, the laser arm's tip sensor and the Watflex's strain
-        bridges (rigs.py: these two where a run starts moving)."""
+        generic rig's every one; the laser arm's and Watflex's encoders, the laser arm's tip sensor and the Watflex's
+        strain bridges (rigs.py: these two where a run starts moving)."""
         if self.sensors == "generic":
             return self.of_kind("measured")
         return self.position_channels() + (["tip_sensor"] if self.sensors == "laser_arm" else
