@@ -28,11 +28,11 @@ def _at_rest(rec: Recording, channels) -> Recording:
     return out
 
 
+LASER, ELBOW = ("hub_angle", "tip_sensor"), ("elbow_angle", "strain_2A", "strain_2B")
 CUTS = {  # scenario, where it is cut (s), the channels that say it moves, the largest NRMSE from a moving start
-    "laser arm, 0.15 s into a 2.5 mm step": ("laser_arm_step", 0.15, ("hub_angle", "tip_sensor"), 0.1),
-    "laser arm, 0.3 s: the hub nearly still, the beam swinging": ("laser_arm_step", 0.3, ("hub_angle", "tip_sensor"), 0.15),
-    "watflex single-link, 0.8 s: the elbow mid-step": ("watflex_elbow_step", 0.8, ("elbow_angle", "strain_2A", "strain_2B"),
-                                                       0.15),
+    "laser arm, 0.15 s into a 2.5 mm step": ("laser_arm_step", 0.15, LASER, 0.1),
+    "laser arm, 0.3 s: the hub nearly still, the beam swinging": ("laser_arm_step", 0.3, LASER, 0.15),
+    "watflex single-link, 0.8 s: the elbow mid-step": ("watflex_elbow_step", 0.8, ELBOW, 0.15),
 }
 
 
