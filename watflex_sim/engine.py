@@ -97,6 +97,7 @@ def _keep_warning(message: str) -> None:
 mujoco.set_mju_user_warning(_keep_warning)
 
 
+WARM_UP_S = 0.2  # s of a moving start's past fed to the controller (ControlLoop._warm_up): a 10 Hz rate filter settles
 MAX_QVEL = 1e4  # rad/s or m/s: beyond this a run is taken as diverged
 CHECK_EVERY = 10  # control periods between divergence checks (MuJoCo's warning counters persist)
 
@@ -301,6 +302,7 @@ class ControlLoop:
         if unknown:
             raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
+        self._warm = {c: float(r) for c, r in rates.items() if math.isfinite(r)}  # a moving start: _warm_up
         references = _references(scenario, description)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
@@ -351,6 +353,8 @@ class ControlLoop:
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
             obs = self._sense(obs)
+        if k == 0 and self._warm:
+            self._warm_up(obs)
         command = self.controller(t, obs)
         recorded = self.rig.actuate(command)
         if self._commands:  # delayed plant input; the recorded command is the one computed now
@@ -368,6 +372,14 @@ class ControlLoop:
             else:
                 self._applied = self.data.ctrl.copy()
         return obs, recorded
+
+    def _warm_up(self, obs: dict[str, float]) -> None:
+        """A run that starts moving: the controller fed the WARM_UP_S before the start that the start's rates imply
+        (each such channel on a line back from its first reading, the rest as at the start), its commands discarded,
+        so that its rate filters and observers start in step with the motion, not at rest."""
+        for i in range(round(WARM_UP_S / self.period), 0, -1):
+            self.controller(-i * self.period, {**obs, **{c: obs[c] - rate * i * self.period
+                                                         for c, rate in self._warm.items() if c in obs}})
 
     def release(self, j: int) -> None:
         """Before physics substep j of a tick: the new plant input arrives if it is due (jitter)."""
