@@ -4,6 +4,8 @@ the Watflex's links bent as their tip sensor and strain bridges read. Started at
 recording is off by about its whole response (a clean laser case cut 0.15 s into a step was diagnosed `unexplained`,
 26.5 x the noise; docs/diagnosis.md, "A recording that starts moving").
 """
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,10 @@ from watflex_sim.engine import simulate
 from watflex_sim.metrics import nrmse
 from watflex_sim.recording import Recording
 from watflex_sim.resim import _moving, _start, resimulate, scenario_from_recording
-from watflex_sim.scenario import load_scenario
+from watflex_sim.rigdesc import load_rig
+from watflex_sim.scenario import check, load_scenario
+
+ROTFLEX = Path(__file__).parents[1] / "examples" / "rotary_flexible_link"
 
 
 def _cut(rec: Recording, t0: float) -> Recording:
@@ -33,26 +38,39 @@ CUTS = {  # scenario, where it is cut (s), the channels that say it moves, the l
     "laser arm, 0.15 s into a 2.5 mm step": ("laser_arm_step", 0.15, LASER, 0.1),
     "laser arm, 0.3 s: the hub nearly still, the beam swinging": ("laser_arm_step", 0.3, LASER, 0.15),
     "watflex single-link, 0.8 s: the elbow mid-step": ("watflex_elbow_step", 0.8, ELBOW, 0.07),
+    "a rig described as data (rotary flexible link), 2.034 s: the hub at its fastest":
+        (str(ROTFLEX / "steps_with_friction.toml"), 2.034, ("hub", "link"), 0.2),
 }
 
 
+def _run(name: str):
+    """(recording of scenario `name` noise off for 2 s (3 s for the rotary link, stepping at 2 s), its rig)."""
+    if name.endswith(".toml"):  # the rotary flexible link, its friction left out
+        rig = load_rig(str(ROTFLEX / "rig.toml"))
+        return simulate(check(load_scenario(name, ["noise=false", "duration_s=3.0"]) | {"effects": []}), rig=rig), rig
+    return simulate(load_scenario(name, ["duration_s=2.0", "noise=false"])), None
+
+
 @pytest.mark.parametrize("case", CUTS)
-def test_a_recording_that_starts_moving_is_resimulated_from_its_moving_start(case):
-    """A noise-off run (2 s) cut mid-move, re-simulated on the same model: every channel within the NRMSE the case
-    allows (measured 0.035-0.071 cut at 0.15 s, 0.025-0.11 at 0.3 s, 0.020-0.043 for the Watflex: the rates from
-    20 ms of quantised samples, the links in their static tip-load shape; the Watflex's torque command 0.098 without
-    its PD's rate filter warmed up, ControlLoop._warm_up); started at rest at the same readings (before), some
-    channel is off by more than 0.7 of its spread (measured 1.07-1.76)."""
+def test_a_recording_that_starts_moving_is_resimulated_from_its_moving_start(case, monkeypatch):
+    """A noise-off run cut mid-move, re-simulated on the same model: every channel within the NRMSE the case
+    allows (measured 0.035-0.071 cut at 0.15 s, 0.025-0.11 at 0.3 s, 0.020-0.043 for the Watflex, 0.0076-0.11 for
+    the rotary link: the rates from 20 ms of quantised samples, the links in their static tip-load shape; the
+    Watflex's torque command 0.098 and the rotary link's voltage 0.37 without the controller's rate filters warmed
+    up, ControlLoop._warm_up); started at rest at the same readings (before), some channel is off by more than 0.7
+    of its spread (measured 0.75-1.76)."""
     name, t0, movers, allowed = CUTS[case]
-    rec = _cut(simulate(load_scenario(name, ["duration_s=2.0", "noise=false"])).recording, t0)
-    assert scenario_from_recording(rec)["initial_rate"], "the cut recording starts moving"
-    again = resimulate(rec)
+    monkeypatch.setenv("WATFLEX_RIGS", str(ROTFLEX))  # where the rotary link's scenario finds its rig by name
+    result, rig = _run(name)
+    rec = _cut(result.recording, t0)
+    assert scenario_from_recording(rec, rig)["initial_rate"], "the cut recording starts moving"
+    again = resimulate(rec, rig=rig)
     measured = [c for c, x in rec.channels.items() if np.nanstd(x) > 0 and "reference" not in c]
     for c in measured:
         assert nrmse(rec.channels[c], again.channels[c]) < allowed, c
     resting = _at_rest(rec, movers)
-    assert not scenario_from_recording(resting)["initial_rate"]
-    from_rest = resimulate(resting)
+    assert not scenario_from_recording(resting, rig)["initial_rate"]
+    from_rest = resimulate(resting, rig=rig)
     assert max(nrmse(rec.channels[c], from_rest.channels[c]) for c in measured) > 0.7
 
 
