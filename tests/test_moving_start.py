@@ -90,3 +90,12 @@ def test_a_start_rate_comes_from_a_parabola_through_the_first_samples():
         assert not _moving(t, still, *_start(t, still))
     turning = encoder(0.1 + 0.05 * t)
     assert _moving(t, turning, *_start(t, turning))
+
+
+def test_a_start_rate_that_is_not_a_number_is_bad_input():
+    """`initial_rate` takes finite numbers (unit/s): a word or a NaN is refused in one line naming the key."""
+    from watflex_sim.model import ConfigError
+
+    for value in ('"fast"', "nan"):
+        with pytest.raises(ConfigError, match=r"initial_rate\.elbow_angle must be a finite number"):
+            load_scenario("watflex_elbow_step", [f"initial_rate={{elbow_angle={value}}}"])

@@ -470,14 +470,16 @@ class GenericRig(Rig):
             rate = rates.get(channel, 0.0) / scale if math.isfinite(rates.get(channel, 0.0)) else 0.0
             if kind == "position":
                 self.data.qpos[index] = x
-                self.data.qvel[dof[index]] = rate if rate else self.data.qvel[dof[index]]
+                if rate:
+                    self.data.qvel[dof[index]] = rate
             elif kind == "velocity":
                 self.data.qvel[index] = x
             else:  # q_i = c w_i with sum w_i q_i = x: the least-norm shape, a tip-load shape for a chain
                 norm = sum(w * w for _q, w in index)
                 for q, w in index:
                     self.data.qpos[q] = x * w / norm
-                    self.data.qvel[dof[q]] = rate * w / norm if rate else self.data.qvel[dof[q]]
+                    if rate:
+                        self.data.qvel[dof[q]] = rate * w / norm
         mujoco.mj_forward(self.model, self.data)
 
     def actuate(self, command: dict[str, float]) -> dict[str, float]:

@@ -199,6 +199,9 @@ def check(scenario: dict) -> dict:
     for key, what in (("initial", "value"), ("initial_rate", "rate (unit/s)")):
         if not isinstance(scenario[key], dict):
             raise ConfigError(f"{key} must be a table channel = {what}")
+        for channel, value in scenario[key].items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{key}.{channel} must be a finite number ({what}), got {value!r}")
     if not isinstance(scenario["locked_joints"], dict):
         raise ConfigError("locked_joints must be a table joint = angle (rad)")
     for key in ("reference", "command"):
