@@ -240,24 +240,26 @@ class WatflexRig(Rig):
         )
 
     def start_at(self, first: dict[str, float], rates: dict[str, float] | None = None) -> None:
-        """As Rig.start_at, and where `first` has strain bridges (V) (a run that starts moving), each link with one
-        bent in its static tip-load shape (hinge i's angle proportional to L - x_i), its amplitude and rate the
-        least-squares fit of its bridges' readings and rates (`rates`, V/s)."""
+        """As Rig.start_at, and where `first` has strain bridges (V) (a run that starts moving), each link with them
+        bent in the static shape of a load at its tip, a force and a moment (hinge i's angle a (L - x_i) + b: the
+        curvature linear along the link), a and b and their rates the least-squares fit of its bridges' readings and
+        rates (`rates`, V/s; the least-norm one where a link has one bridge)."""
         super().start_at(first, rates)
         rates, bent = rates or {}, False
         for link in (1, 2):
             beam, n = (self.p.link1 if link == 1 else self.p.link2), self.p.n_segments
             hinges = {self._qpos(f"link{link}_j{i:02d}"): beam.length * (1 - (i - 0.5) / n) for i in range(1, n + 1)}
             hinges.pop(None, None)  # a rigid link 1 (the single-link set-up) has none
-            gauges = [(first[c], rates.get(c, 0.0), va * hinges.get(qa, 0.0) + vb * hinges.get(qb, 0.0))
-                      for c, qa, qb, va, vb in self._gauges if qa in hinges and math.isfinite(first.get(c, math.nan))]
-            norm = sum(g * g for _v, _r, g in gauges)
-            if not norm:
+            gauges = [(c, qa, qb, va, vb) for c, qa, qb, va, vb in self._gauges
+                      if qa in hinges and qb in hinges and math.isfinite(first.get(c, math.nan))]
+            if not gauges:
                 continue
-            size = sum(v * g for v, _r, g in gauges) / norm  # rad per m of lever
-            speed = sum(r * g for _v, r, g in gauges) / norm if all(math.isfinite(r) for _v, r, _g in gauges) else 0.0
+            # a bridge's reading per unit a (force) and per unit b (moment)
+            per_unit = np.array([[va * hinges[qa] + vb * hinges[qb], va + vb] for _c, qa, qb, va, vb in gauges])
+            readings = np.array([[first[c], rates.get(c, 0.0)] for c, *_ in gauges])
+            (a, a_rate), (b, b_rate) = np.linalg.lstsq(per_unit, np.nan_to_num(readings), rcond=None)[0]
             for q, arm in hinges.items():
-                self.data.qpos[q], self.data.qvel[self._dof_of_qpos(q)] = size * arm, speed * arm
+                self.data.qpos[q], self.data.qvel[self._dof_of_qpos(q)] = a * arm + b, a_rate * arm + b_rate
             bent = True
         if bent:
             mujoco.mj_forward(self.model, self.data)
