@@ -100,3 +100,18 @@ def test_a_start_rate_that_is_not_a_number_is_bad_input():
     for value in ('"fast"', "nan"):
         with pytest.raises(ConfigError, match=r"initial_rate\.elbow_angle must be a finite number"):
             load_scenario("watflex_elbow_step", [f"initial_rate={{elbow_angle={value}}}"])
+
+
+def test_moving_starts_in_lockstep_match_their_single_runs():
+    """lockstep.simulate_batch (the diagnosis' re-simulations): a Watflex recording cut mid-move and the same run
+    from rest, side by side, give their single runs' recordings bit for bit (the moving one takes the per-member
+    control half: the column form has no warm-up)."""
+    from watflex_sim.lockstep import simulate_batch
+
+    rec = _cut(_run("watflex_elbow_step")[0].recording, 0.8)
+    scenarios = [scenario_from_recording(rec), scenario_from_recording(_at_rest(rec, ELBOW))]
+    assert scenarios[0]["initial_rate"] and not scenarios[1]["initial_rate"]
+    for scenario, result in zip(scenarios, simulate_batch(scenarios, nthread=2, always=True)):
+        single = simulate(scenario).recording
+        for c, x in single.channels.items():
+            assert np.array_equal(x, result.recording.channels[c], equal_nan=True), c
