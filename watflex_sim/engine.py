@@ -282,8 +282,9 @@ class ControlLoop:
         _settle_bearings(self.model, self.data)
         self.rig = description.make_sensors(self.model, self.data, scenario, period)
         initial, rates = scenario.get("initial") or {}, scenario.get("initial_rate") or {}
-        if initial or rates:  # start where a recording starts
-            unknown = sorted((set(initial) | set(rates)) - set(description.start_channels()))
+        accelerations = scenario.get("initial_acceleration") or {}
+        if initial or rates or accelerations:  # start where a recording starts
+            unknown = sorted((set(initial) | set(rates) | set(accelerations)) - set(description.start_channels()))
             if unknown:
                 raise ConfigError(f"initial: rig {rig_name!r} cannot start from {', '.join(unknown)} "
                                   f"(it starts from {', '.join(description.start_channels())})")
@@ -302,7 +303,7 @@ class ControlLoop:
         if unknown:
             raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
-        self._warm = {c: float(r) for c, r in rates.items() if math.isfinite(r)}  # a moving start: _warm_up
+        self._warm = {c: (float(r), float(accelerations.get(c, 0.0))) for c, r in rates.items()}  # a moving start
         references = _references(scenario, description)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
@@ -374,12 +375,13 @@ class ControlLoop:
         return obs, recorded
 
     def _warm_up(self, obs: dict[str, float]) -> None:
-        """A run that starts moving: the controller fed the WARM_UP_S before the start that the start's rates imply
-        (each such channel on a line back from its first reading, the rest as at the start), its commands discarded,
-        so that its rate filters and observers start in step with the motion, not at rest."""
+        """A run that starts moving: the controller fed the WARM_UP_S before the start that the start's rates and
+        accelerations imply (each such channel on a parabola back from its first reading, the rest as at the start),
+        its commands discarded, so that its rate filters and observers start in step with the motion, not at rest."""
         for i in range(round(WARM_UP_S / self.period), 0, -1):
-            self.controller(-i * self.period, {**obs, **{c: obs[c] - rate * i * self.period
-                                                         for c, rate in self._warm.items() if c in obs}})
+            back = i * self.period  # s before the start
+            self.controller(-back, {**obs, **{c: obs[c] - rate * back + 0.5 * acceleration * back * back
+                                              for c, (rate, acceleration) in self._warm.items() if c in obs}})
 
     def release(self, j: int) -> None:
         """Before physics substep j of a tick: the new plant input arrives if it is due (jitter)."""

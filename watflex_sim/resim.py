@@ -49,8 +49,8 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
     # where it starts moving, every sensor the rig starts from, at the value and rate its first samples give
     starts = {c: _start(rec.time, rec.channels[c]) for c in description.start_channels() if c in rec.channels}
     if any(_moving(rec.time, rec.channels[c], *starts[c]) for c in starts):
-        scenario["initial"] = {c: value for c, (value, _rate, _sd) in starts.items() if math.isfinite(value)}
-        scenario["initial_rate"] = {c: rate for c, (_value, rate, _sd) in starts.items() if math.isfinite(rate)}
+        for key, k in (("initial", 0), ("initial_rate", 1), ("initial_acceleration", 2)):
+            scenario[key] = {c: start[k] for c, start in starts.items() if math.isfinite(start[k])}
     else:
         scenario["initial"] = {c: _first(rec.channels[c]) for c in description.start_channels() if c in rec.channels
                                and (description.sensors == "generic" or c in description.position_channels()
@@ -78,12 +78,13 @@ def _away_from_nominal(values: np.ndarray) -> bool:
     return math.isfinite(first) and abs(first) > OFFSET_REACH * float(np.nanstd(values))
 
 
-def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float]:
-    """(value, rate, the rate's standard error) at a channel's first finite sample (unit, unit/s), from a parabola
-    through its samples in the first START_WINDOW_S (at least START_SAMPLES); NaNs where it has too few."""
+def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float, float]:
+    """(value, rate, acceleration, the rate's standard error) at a channel's first finite sample (unit, unit/s,
+    unit/s^2), from a parabola through its samples in the first START_WINDOW_S (at least START_SAMPLES); NaNs where it
+    has too few."""
     finite = np.flatnonzero(np.isfinite(values))
     if finite.size < START_SAMPLES:
-        return math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan
     t = time[finite] - time[finite[0]]
     take = finite[: max(START_SAMPLES, int(np.searchsorted(t, START_WINDOW_S, side="right")))]
     t, y = time[take] - time[take[0]], values[take]
@@ -91,10 +92,10 @@ def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float]:
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)
     variance = float(np.sum((y - design @ coef) ** 2)) / (len(y) - 3)
     sd = math.sqrt(variance * np.linalg.inv(design.T @ design)[1, 1])
-    return float(coef[0]), float(coef[1]), sd
+    return float(coef[0]), float(coef[1]), 2.0 * float(coef[2]), sd
 
 
-def _moving(time: np.ndarray, values: np.ndarray, _value: float, rate: float, sd: float) -> bool:
+def _moving(time: np.ndarray, values: np.ndarray, _value: float, rate: float, _acceleration: float, sd: float) -> bool:
     """Whether a sensor's rate at its first sample says the arm was moving when the recording began: MOVING_SD
     standard errors from rest, a change over START_WINDOW_S of more than two of its steps (the smallest change
     between its samples), and MOVING_SHARE of the channel's rms rate over the whole recording (over START_WINDOW_S)."""

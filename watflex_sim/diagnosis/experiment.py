@@ -47,7 +47,7 @@ def _variant(data: Data, i: int, scale: float | None, stretch: float) -> dict:
                 signal["values"] = (v0 + moved).tolist()
                 signal["time_s"] = (np.asarray(signal["time_s"]) * stretch).tolist()
     scenario["duration_s"] = float(scenario["duration_s"]) * stretch
-    scenario["initial_rate"] = {}  # an experiment run on the rig starts at rest, whatever the recording caught
+    scenario["initial_rate"] = scenario["initial_acceleration"] = {}  # an experiment run on the rig starts at rest
     return scenario
 
 
