@@ -116,3 +116,17 @@ def test_moving_starts_in_lockstep_match_their_single_runs():
         single = simulate(scenario).recording
         for c, x in single.channels.items():
             assert np.array_equal(x, result.recording.channels[c], equal_nan=True), c
+
+
+def test_an_experiment_proposed_from_a_moving_recording_starts_at_rest():
+    """The experiment a diagnosis proposes varies a recording's experiment for the rig to run: from a recording cut
+    mid-move it starts at rest at the joints' first readings, the links straight (the strain bridges read 0 V at the
+    first sample: noise off), with no rate or acceleration."""
+    from watflex_sim.diagnosis.data import prepare
+    from watflex_sim.diagnosis.experiment import _variant
+
+    rec = _cut(_run("watflex_elbow_step")[0].recording, 0.8)
+    proposed = _variant(prepare([rec], ["cut.csv"]), 0, 2.0, 1.0)
+    assert set(proposed["initial"]) == {"shoulder_angle", "elbow_angle"}
+    assert not proposed["initial_rate"] and not proposed["initial_acceleration"]
+    assert simulate(proposed).recording.channels["strain_2A"][0] == 0.0
