@@ -83,7 +83,9 @@ def _moving_start(rec: Recording, rig: RigDescription, at_rest: dict) -> dict:
     moving = copy.deepcopy(at_rest)
     for key, k in (("initial", 0), ("initial_rate", 1), ("initial_acceleration", 2)):
         moving[key] = {c: start[k] for c, start in starts.items() if math.isfinite(start[k])}
-    key = (rig.name, rig.source, rec.time[0], tuple((c, rec.channels[c][:START_SAMPLES].tobytes()) for c in starts))
+    judged = int(np.searchsorted(rec.time, rec.time[0] + JUDGE_S))  # the samples the choice compares
+    key = (rig.name, rig.source, len(rec.time), rec.time[:judged].tobytes(),
+           tuple((c, x[:judged].tobytes()) for c, x in rec.channels.items()))
     chosen = _MOVING_STARTS.get(key)
     if chosen is None:
         chosen = _start_misfit(rec, rig, moving) < _start_misfit(rec, rig, at_rest)
