@@ -146,3 +146,16 @@ def test_a_step_at_the_first_samples_starts_at_rest(name):
                 signal["times_s"] = [t0 + t - signal["times_s"][0] for t in signal["times_s"]]
         rec = simulate(check(sc)).recording
         assert not scenario_from_recording(rec)["initial_rate"], t0
+
+
+def test_the_choice_holds_for_a_log_at_half_the_loop_rate():
+    """The choice between a moving and a resting start compares the recording at its own times: logged every 2 ms
+    (the Watflex loop runs at 1 ms), an elbow step cut 0.8 s in still starts moving and a step 1 ms in at rest."""
+    def every_other(rec):
+        return Recording(rec.time[::2], {c: v[::2] for c, v in rec.channels.items()}, rec.meta)
+
+    cut = _cut(simulate(load_scenario("watflex_elbow_step", ["duration_s=1.5"])).recording, 0.8)
+    assert scenario_from_recording(every_other(cut))["initial_rate"]
+    sc = load_scenario("watflex_elbow_step", ["duration_s=1.0"])
+    sc["reference"][0]["time_s"] = 0.001
+    assert not scenario_from_recording(every_other(simulate(check(sc)).recording))["initial_rate"]

@@ -102,11 +102,13 @@ def _start_misfit(rec: Recording, rig: RigDescription, scenario: dict) -> float:
         sim = simulate(check(short), rig=rig).recording
     except SimulationError:
         return math.inf
-    n = len(sim.time)
+    within = rec.time - rec.time[0] <= sim.time[-1] + 1e-9  # s: the recording's samples the run covers
+    part = Recording(rec.time[within], {c: v[within] for c, v in rec.channels.items()}, rec.meta)
+    sampled = _sampled(part, sim)  # at the recording's own times (a logger's rate may differ from the loop's)
     total = 0.0
     for c in rig.of_kind("measured"):
-        if c in rec.channels and c in sim.channels:
-            x, y = rec.channels[c][:n], sim.channels[c][:n]
+        if c in part.channels and c in sampled.channels:
+            x, y = part.channels[c], sampled.channels[c]
             spread = float(np.nanstd(rec.channels[c]))
             ok = np.isfinite(x) & np.isfinite(y)
             if spread > 0 and ok.any():
