@@ -15,3 +15,13 @@ class Controller(Protocol):
     def reset(self) -> None: ...
 
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]: ...
+
+
+class StatefulController(Controller, Protocol):
+    """A controller with a state its inputs' recent past does not fix (an integral, an observer's estimate), which it
+    can report and be set to (named values, SI units): a run that starts where a recording starts sets it to what
+    the recording's first commands say it was (resim._controller_start, scenario key `controller_state`)."""
+
+    def state(self) -> dict[str, float]: ...
+
+    def set_state(self, values: Mapping[str, float]) -> None: ...

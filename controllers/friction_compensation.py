@@ -73,6 +73,17 @@ class FrictionCompensation:
         self.compensation = 0.0
         self.velocity = 0.0
 
+    def state(self) -> dict[str, float]:
+        """The compensated controller's state (StatefulController); {} where it has none (the compensation's own
+        velocity filter follows the encoder's recent past)."""
+        return self.inner.state() if hasattr(self.inner, "state") else {}
+
+    def set_state(self, values: Mapping[str, float]) -> None:
+        if values:
+            if not hasattr(self.inner, "set_state"):
+                raise ValueError(f"{type(self.inner).__name__} has no state to set")
+            self.inner.set_state(values)
+
     def _side(self, x: float) -> Friction:
         return self.positive if x > 0 else self.negative
 

@@ -159,6 +159,21 @@ class ObserverJoint:
         self.estimate = np.array(x)
         return self.tau
 
+    def state(self) -> dict[str, float]:
+        """The prediction the next step corrects (angles in rad, rates in rad/s) and the last torque (N m); {} before
+        the first step (which starts at rest at its encoder reading)."""
+        if self._predicted is None:
+            return {}
+        names = ("theta", "rate") if self.rigid else ("theta_m", "theta_a", "rate_m", "rate_a")
+        return {**dict(zip(names, self._predicted)), "torque": self.tau}
+
+    def set_state(self, values: Mapping[str, float]) -> None:
+        """Set the state `state` names (every name of it; ValueError otherwise)."""
+        names = ("theta", "rate") if self.rigid else ("theta_m", "theta_a", "rate_m", "rate_a")
+        if set(values) != {*names, "torque"}:
+            raise ValueError(f"observer state needs {', '.join((*names, 'torque'))}, got {', '.join(values) or 'none'}")
+        self._predicted, self.tau = [float(values[n]) for n in names], float(values["torque"])
+
 
 def _clip(x: float, low: float, high: float) -> float:
     return min(max(x, low), high)
@@ -250,6 +265,18 @@ class Observer:
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         return {ch: u.step(obs[f"{j}_angle"], obs[f"{j}_reference"])
                 for j, ch, u in zip(self.joints, self.channels, self.units)}
+
+    def state(self) -> dict[str, float]:
+        """Each joint's ObserverJoint.state, its names prefixed `{joint}_`."""
+        return {f"{j}_{name}": v for j, u in zip(self.joints, self.units) for name, v in u.state().items()}
+
+    def set_state(self, values: Mapping[str, float]) -> None:
+        """Set each joint's state from the values named `{joint}_...` (ValueError for a name of no joint)."""
+        unknown = [n for n in values if not any(n.startswith(f"{j}_") for j in self.joints)]
+        if unknown:
+            raise ValueError(f"observer state: {', '.join(unknown)} name no joint of {', '.join(self.joints)}")
+        for j, u in zip(self.joints, self.units):
+            u.set_state({n.removeprefix(f"{j}_"): v for n, v in values.items() if n.startswith(f"{j}_")})
 
     @classmethod
     def columns(cls, members: list["Observer"], times: np.ndarray) -> "ObserverColumns | None":

@@ -39,6 +39,17 @@ class PID:
         """The measured channels the law reads."""
         return {self.position} | {c for c in (self.reference, self.deflection) if c}
 
+    def state(self) -> dict[str, float]:
+        """The integral of the error (position unit x s) where the law has an integral term (ki != 0), else {}."""
+        return {"integral": self.integral} if self.ki else {}
+
+    def set_state(self, values: Mapping[str, float]) -> None:
+        """Set the state `state` names (ValueError for any other name)."""
+        if set(values) - set(self.state()):
+            raise ValueError(f"pid state has {', '.join(self.state()) or 'nothing'} (ki = {self.ki}), "
+                             f"got {', '.join(values)}")
+        self.integral = float(values.get("integral", self.integral))
+
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         q = obs[self.position]
         e = (obs[self.reference] if self.reference else 0.0) - q

@@ -57,7 +57,7 @@ def test_a_recording_that_starts_moving_is_resimulated_from_its_moving_start(cas
     allows (measured 0.035-0.071 cut at 0.15 s, 0.025-0.11 at 0.3 s, 0.0046-0.0099 for the Watflex, 0.0063-0.13 for
     the rotary link: the rates from 20 ms of quantised samples, the links in their static tip-load shape, the
     Watflex's with a tip moment too (link 2 with a tip force alone: 0.012-0.043); the Watflex's torque command
-    0.0995 and the rotary link's voltage 0.37 without the controller warmed up on the past, ControlLoop._warm_up,
+    0.0995 and the rotary link's voltage 0.37 without the controller warmed up on the past, engine.warm_up,
     0.025 and 0.11 with that past on a line rather than a parabola); started at rest at the same readings (before),
     some channel is off by more than 0.7 of its spread (measured 0.75-1.76)."""
     name, t0, movers, allowed = CUTS[case]
@@ -88,10 +88,13 @@ def test_a_start_rate_comes_from_a_parabola_through_the_first_samples():
     def encoder(angle):
         return np.round(angle / count) * count
 
+    def moving(values):
+        _value, rate, _acceleration, sd = _start(t, values)
+        return _moving(t, values, rate, sd)
+
     for still in (np.full(t.shape, 0.2), encoder(50 * t**2)):
-        assert not _moving(t, still, *_start(t, still))
-    turning = encoder(0.1 + 0.05 * t)
-    assert _moving(t, turning, *_start(t, turning))
+        assert not moving(still)
+    assert moving(encoder(0.1 + 0.05 * t))
 
 
 def test_a_start_rate_that_is_not_a_number_is_bad_input():

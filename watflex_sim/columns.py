@@ -296,13 +296,13 @@ class ColumnControl:
     @staticmethod
     def fits(loops: list) -> bool:
         """Whether these loops (one structure) may have a column form: a rig with one, no delay on the control
-        half, no jitter, no moving start (ControlLoop._warm_up), a controller type with a `columns` form (which may
-        still find its members unlike)."""
+        half, no jitter, no moving start or controller state (engine.warm_up), a controller type with a `columns`
+        form (which may still find its members unlike)."""
         first = loops[0]
         form = FORMS.get(type(first.rig))
         if form is None or any(type(loop.rig) is not type(first.rig) for loop in loops):
             return False
-        if any(loop._sensor_fifo or loop._commands or loop.delays is not None or loop._warm
+        if any(loop._sensor_fifo or loop._commands or loop.delays is not None or loop._warm or loop._controller_state
                or loop.period != first.period or loop.rig.channels != first.rig.channels
                or set(loop.references.columns) != set(first.references.columns)
                or not np.array_equal(loop.monitor.dofs, first.monitor.dofs) for loop in loops):

@@ -97,7 +97,7 @@ def _keep_warning(message: str) -> None:
 mujoco.set_mju_user_warning(_keep_warning)
 
 
-WARM_UP_S = 0.2  # s of a moving start's past fed to the controller (ControlLoop._warm_up): a 10 Hz rate filter settles
+WARM_UP_S = 0.2  # s of a moving start's past fed to the controller (engine.warm_up): a 10 Hz rate filter settles
 MAX_QVEL = 1e4  # rad/s or m/s: beyond this a run is taken as diverged
 CHECK_EVERY = 10  # control periods between divergence checks (MuJoCo's warning counters persist)
 
@@ -238,6 +238,17 @@ def _settle_bearings(model: mujoco.MjModel, data: mujoco.MjData, seconds: float 
     _SETTLED.put(key, (state, warnings))
 
 
+def warm_up(controller, obs: dict[str, float], warm: dict[str, tuple[float, float]], period: float) -> None:
+    """A run that starts moving, or sets its controller's state: the controller fed the WARM_UP_S before the start
+    that `warm` (channel -> (rate, acceleration) at the start, unit/s and unit/s^2) implies, each such channel on a
+    parabola back from its first reading `obs`, the rest as at the start, at every `period` (s), its commands
+    discarded, so that its rate filters and observers start in step with the motion, not at rest."""
+    for i in range(round(WARM_UP_S / period), 0, -1):
+        back = i * period  # s before the start
+        controller(-back, {**obs, **{c: obs[c] - rate * back + 0.5 * acceleration * back * back
+                                     for c, (rate, acceleration) in warm.items() if c in obs}})
+
+
 class ControlLoop:
     """A scenario set up to run: model, data, rig, joint friction, controller and references.
 
@@ -292,7 +303,7 @@ class ControlLoop:
             inputs = {c: (float(f(0.0)), (float(f(period)) - float(f(0.0))) / period)
                       for c, f in _references(scenario, description).items()}  # the references where the run starts
             self.rig.start_at({**{c: v for c, (v, _) in inputs.items()}, **self._true_values(initial)},
-                              {**{c: r for c, (_, r) in inputs.items()}, **self._true_rates(rates)})
+                              {**{c: r for c, (_, r) in inputs.items()}, **self._true_values(rates, rates=True)})
         if scenario["friction"] == "none":
             self.model.dof_frictionloss[:] = 0.0
         frictions = patched(scenario_frictions(description, scenario), patch.friction, patch.friction_add)
@@ -304,6 +315,9 @@ class ControlLoop:
             raise ConfigError(f"controller {scenario['controller']['type']!r} reads unknown channel(s) of {rig_name}: {', '.join(unknown)}")
         self.controller.reset()
         self._warm = {c: (float(r), float(accelerations.get(c, 0.0))) for c, r in rates.items()}  # a moving start
+        self._controller_state = dict(scenario.get("controller_state") or {})  # set after the warm-up
+        if self._controller_state and not hasattr(self.controller, "set_state"):
+            raise ConfigError(f"controller_state: controller {scenario['controller']['type']!r} has no state to set")
         references = _references(scenario, description)
         unknown = set(references) - set(self.rig.input_channels)
         if unknown:
@@ -354,8 +368,13 @@ class ControlLoop:
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
             obs = self._sense(obs)
-        if k == 0 and self._warm:
-            self._warm_up(obs)
+        if k == 0 and (self._warm or self._controller_state):
+            warm_up(self.controller, obs, self._warm, self.period)
+            if self._controller_state:
+                try:
+                    self.controller.set_state(self._controller_state)
+                except ValueError as exc:
+                    raise ConfigError(f"controller_state: {exc}") from None
         command = self.controller(t, obs)
         recorded = self.rig.actuate(command)
         if self._commands:  # delayed plant input; the recorded command is the one computed now
@@ -374,34 +393,21 @@ class ControlLoop:
                 self._applied = self.data.ctrl.copy()
         return obs, recorded
 
-    def _warm_up(self, obs: dict[str, float]) -> None:
-        """A run that starts moving: the controller fed the WARM_UP_S before the start that the start's rates and
-        accelerations imply (each such channel on a parabola back from its first reading, the rest as at the start),
-        its commands discarded, so that its rate filters and observers start in step with the motion, not at rest."""
-        for i in range(round(WARM_UP_S / self.period), 0, -1):
-            back = i * self.period  # s before the start
-            self.controller(-back, {**obs, **{c: obs[c] - rate * back + 0.5 * acceleration * back * back
-                                              for c, (rate, acceleration) in self._warm.items() if c in obs}})
-
     def release(self, j: int) -> None:
         """Before physics substep j of a tick: the new plant input arrives if it is due (jitter)."""
         if j == self._due and j:
             self.data.ctrl[:] = self._applied
 
-    def _true_values(self, readings: dict[str, float]) -> dict[str, float]:
+    def _true_values(self, readings: dict[str, float], rates: bool = False) -> dict[str, float]:
         """What the rig's own sensors would read (channel -> value) where the sensor gain and offset effects make
         them read `readings`: a run started at a recording's first samples with an encoder offset in the model
-        starts where that offset puts the joint, not at the reading."""
+        starts where that offset puts the joint, not at the reading. `rates`: readings are rates of change (unit/s),
+        which the offsets leave alone."""
         out = dict(readings)
         for channel, (gain, offset) in self.patch.sensor.items():
             if channel in out and gain:
-                out[channel] = (out[channel] - offset) / gain
+                out[channel] = (out[channel] - (0.0 if rates else offset)) / gain
         return out
-
-    def _true_rates(self, rates: dict[str, float]) -> dict[str, float]:
-        """As `_true_values` for rates of change (unit/s): the sensor gain effects inverted."""
-        return {c: r / self.patch.sensor[c][0] if self.patch.sensor.get(c, (0.0, 0.0))[0] else r
-                for c, r in rates.items()}
 
     def _sense(self, obs: dict[str, float]) -> dict[str, float]:
         """Sensor gain/offset and delay effects on the measured channels."""

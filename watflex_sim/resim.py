@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .effects import CATALOGUE
-from .engine import SimulationError, simulate
+from .engine import SimulationError, make_controller, simulate, warm_up
 from .latest import Latest
 from .lockstep import simulate_batch
 from .model import ConfigError, load_model
@@ -22,6 +22,8 @@ MOVING_SD = 5.0  # a sensor's rate this many standard errors from 0 at the first
 MOVING_SHARE = 0.25  # ... and this share of the channel's rms rate over the recording: a start's motion that matters
 # (measured: EMPS' runs, whose reference starts moving at the first sample, 0.07; recordings cut mid-move 1.6-27)
 JUDGE_S = 0.1  # s: a moving start is kept where the nominal model started so follows this much of the recording closer
+STATE_TOLERANCE = 0.05  # rms misfit (in the commands' spreads) of a controller's replayed first commands that its
+# state is fitted beyond (measured 0.0013-0.005 for Watflex runs from reset: the 12-bit converter steps)
 
 
 def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -> dict:
@@ -64,33 +66,123 @@ def scenario_from_recording(rec: Recording, rig: RigDescription | None = None) -
         scenario["command"] = [_samples(c, time, rec.channels[c]) for c in commands]
     else:
         scenario["controller"] = controller
-    return _moving_start(rec, description, check(scenario))
+    return _start_as_recorded(rec, description, check(scenario))
 
 
-_MOVING_STARTS = Latest(1024)  # (rig, the recording's first samples) -> whether its start is taken as moving
+_STARTS = Latest(1024)  # (rig, the recording's first samples) -> the start chosen for it (scenario keys)
+START_KEYS = ("initial", "initial_rate", "initial_acceleration", "controller_state")
 
 
-def _moving_start(rec: Recording, rig: RigDescription, at_rest: dict) -> dict:
-    """`at_rest` started moving where the recording starts so: every start sensor at the value, rate and acceleration
-    a parabola through its first START_WINDOW_S gives (_start), where one of them moves (_moving) and the nominal
-    model started so follows the recording's first JUDGE_S closer than started at rest (a step at or just after the
+def _start_as_recorded(rec: Recording, rig: RigDescription, at_rest: dict) -> dict:
+    """`at_rest` started as the recording starts: moving, every start sensor at the value, rate and acceleration a
+    parabola through its first START_WINDOW_S gives (_start), where one of them moves (_moving); its controller in the
+    state its first commands say (_controller_start), where it has one the run would not start it in. Each is kept
+    only where the nominal model started so follows the recording's first JUDGE_S closer (a step at or just after the
     first sample moves an arm at rest as fast, on a motor quicker than the window; measured: a laser step 0-10 ms in
     and Watflex steps 0-10 ms in read as moving by their parabolas alone). The choice is made once per recording (per
     process), on the nominal model, so every model a diagnosis simulates starts alike."""
-    starts = {c: _start(rec.time, rec.channels[c]) for c in rig.start_channels() if c in rec.channels}
-    if not any(_moving(rec.time, rec.channels[c], *starts[c]) for c in starts):
-        return at_rest
-    moving = copy.deepcopy(at_rest)
-    for key, k in (("initial", 0), ("initial_rate", 1), ("initial_acceleration", 2)):
-        moving[key] = {c: start[k] for c, start in starts.items() if math.isfinite(start[k])}
     judged = int(np.searchsorted(rec.time, rec.time[0] + JUDGE_S))  # the samples the choice compares
     key = (rig.name, rig.source, len(rec.time), rec.time[:judged].tobytes(),
            tuple((c, x[:judged].tobytes()) for c, x in rec.channels.items()))
-    chosen = _MOVING_STARTS.get(key)
+    chosen = _STARTS.get(key)
     if chosen is None:
-        chosen = _start_misfit(rec, rig, moving) < _start_misfit(rec, rig, at_rest)
-        _MOVING_STARTS.put(key, chosen)
-    return moving if chosen else at_rest
+        options = [at_rest]
+        starts = {c: _start(rec.time, rec.channels[c]) for c in rig.start_channels() if c in rec.channels}
+        if any(_moving(rec.time, rec.channels[c], starts[c][1], starts[c][3]) for c in starts):
+            moving = copy.deepcopy(at_rest)
+            for name, k in zip(START_KEYS, range(3)):
+                moving[name] = {c: start[k] for c, start in starts.items() if math.isfinite(start[k])}
+            options.append(moving)
+        state = _controller_start(rec, rig, options[-1])
+        if state:
+            options.append(dict(options[-1], controller_state=state))
+        best = options[0] if len(options) == 1 else min(options, key=lambda s: _start_misfit(rec, rig, s))
+        chosen = {name: best[name] for name in START_KEYS}
+        _STARTS.put(key, chosen)
+    return dict(at_rest, **copy.deepcopy(chosen))
+
+
+def _controller_start(rec: Recording, rig: RigDescription, scenario: dict) -> dict[str, float]:
+    """The state of `scenario`'s controller at the recording's first sample (controllers.base.StatefulController)
+    where the controller, started as the run would start it (at rest, or warmed up on the moving start's past) and
+    fed the recording's measured channels, repeats the commands the recording holds worse than STATE_TOLERANCE over
+    the first START_WINDOW_S: the state (after that warm-up) whose replay repeats them best over the first JUDGE_S,
+    least squares in the commands' spreads, where it halves that misfit; {} otherwise, and where nothing can be
+    replayed (open loop, a controller without state, a recording not sampled at the control period, a channel the
+    controller reads that the recording lacks). Samples where a command sits at its recorded extreme are left out (a
+    converter's limit the controller's output is cut to)."""
+    if scenario["controller"]["type"] in ("none", "open_loop"):
+        return {}
+    period = float(scenario["control_period_s"])
+    n = int(round(JUDGE_S / period))
+    if len(rec.time) < n or not np.allclose(np.diff(rec.time[:n]), period, rtol=1e-3, atol=0.0):
+        return {}
+    commands = [c for c in rig.of_kind("command") if c in rec.channels and float(np.nanstd(rec.channels[c])) > 0]
+    rows = [{c: float(x[k]) for c, x in rec.channels.items() if c not in rig.of_kind("command")} for k in range(n)]
+    recorded = {c: rec.channels[c][:n] for c in commands}
+    usable = {c: np.isfinite(x) & (x != np.nanmax(rec.channels[c])) & (x != np.nanmin(rec.channels[c]))
+              for c, x in recorded.items()}
+    spread = {c: float(np.nanstd(rec.channels[c])) for c in commands}
+    warm = {c: (r, scenario["initial_acceleration"].get(c, 0.0)) for c, r in scenario["initial_rate"].items()}
+    controller = make_controller(scenario, rig, period)
+    if not commands or not hasattr(controller, "set_state"):
+        return {}
+
+    def misfit(start, values: dict | None, samples: int) -> np.ndarray:
+        """The replay's misfit per usable command sample (in spreads) from `start` (a copy is run), set to values."""
+        law = copy.deepcopy(start)
+        if values is not None:
+            law.set_state(values)
+        out = []
+        for k in range(samples):
+            command = law(k * period, rows[k])
+            out.extend((command[c] - recorded[c][k]) / spread[c] if usable[c][k] else 0.0 for c in commands)
+        return np.asarray(out)
+
+    try:
+        controller.reset()
+        if warm:
+            warm_up(controller, rows[0], warm, period)
+        first = int(round(START_WINDOW_S / period))
+        if _rms(misfit(controller, None, first)) <= STATE_TOLERANCE:
+            return {}
+        if not warm:  # a run at rest sets the state after a warm-up on the first reading held
+            warm_up(controller, rows[0], {}, period)
+        names = list(controller.state())
+        if not names:
+            return {}
+        start = np.array([controller.state()[name] for name in names])
+        before = _rms(misfit(controller, None, n))
+        fitted = _gauss_newton(lambda x: misfit(controller, dict(zip(names, x)), n), start)
+        after = _rms(misfit(controller, dict(zip(names, fitted)), n))
+    except (KeyError, ValueError):  # a channel the recording lacks; a state the law refuses
+        return {}
+    return dict(zip(names, map(float, fitted))) if after < 0.5 * before else {}
+
+
+def _gauss_newton(residuals, x: np.ndarray, rounds: int = 4) -> np.ndarray:
+    """x lowering the sum of squares of residuals(x): Gauss-Newton steps on a forward-difference Jacobian, each the
+    least-norm one (np.linalg.lstsq on the columns scaled to unit norm, rcond 1e-9), so a state the residuals do not
+    see (an observer's last torque under Ostojic's gain, which its next command does not depend on) stays where it
+    was; a step that does not lower the sum ends the search. A controller's replay is linear in its state but
+    where a limit cuts its output, so a few rounds do."""
+    r = residuals(x)
+    for _ in range(rounds):
+        h = 1e-6 * np.maximum(1.0, np.abs(x))
+        jacobian = np.column_stack([(residuals(x + h[i] * np.eye(x.size)[i]) - r) / h[i] for i in range(x.size)])
+        norm = np.linalg.norm(jacobian, axis=0)
+        seen = norm > 1e-9 * norm.max() if norm.max() > 0 else norm > 0
+        step = np.zeros_like(x)
+        step[seen] = np.linalg.lstsq(jacobian[:, seen] / norm[seen], -r, rcond=1e-9)[0] / norm[seen]
+        trial = residuals(x + step)
+        if not np.sum(trial**2) < np.sum(r**2):
+            break
+        x, r = x + step, trial
+    return x
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
 
 
 def _start_misfit(rec: Recording, rig: RigDescription, scenario: dict) -> float:
@@ -132,8 +224,8 @@ def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float, f
     if finite.size < START_SAMPLES:
         return math.nan, math.nan, math.nan, math.nan
     t = time[finite] - time[finite[0]]
-    take = finite[: max(START_SAMPLES, int(np.searchsorted(t, START_WINDOW_S, side="right")))]
-    t, y = time[take] - time[take[0]], values[take]
+    take = max(START_SAMPLES, int(np.searchsorted(t, START_WINDOW_S, side="right")))
+    t, y = t[:take], values[finite[:take]]
     design = np.vander(t, 3, increasing=True)  # 1, t, t^2
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)
     variance = float(np.sum((y - design @ coef) ** 2)) / (len(y) - 3)
@@ -141,7 +233,7 @@ def _start(time: np.ndarray, values: np.ndarray) -> tuple[float, float, float, f
     return float(coef[0]), float(coef[1]), 2.0 * float(coef[2]), sd
 
 
-def _moving(time: np.ndarray, values: np.ndarray, _value: float, rate: float, _acceleration: float, sd: float) -> bool:
+def _moving(time: np.ndarray, values: np.ndarray, rate: float, sd: float) -> bool:
     """Whether a sensor's rate at its first sample says the arm was moving when the recording began: MOVING_SD
     standard errors from rest, a change over START_WINDOW_S of more than two of its steps (the smallest change
     between its samples), and MOVING_SHARE of the channel's rms rate over the whole recording (over START_WINDOW_S)."""

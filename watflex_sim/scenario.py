@@ -38,6 +38,7 @@ DEFAULTS = {
     "initial": {},  # channel -> value: the run starts in that state (the laser arm's and Watflex's encoders, rad)
     "initial_rate": {},  # channel -> its rate of change (unit/s): the run starts moving (rigs.Rig.start_at)
     "initial_acceleration": {},  # channel -> unit/s^2: with initial_rate, the past the controller is warmed up on
+    "controller_state": {},  # name -> value: the controller's state at the start (its `state()` names and units)
     "notes": "",
 }
 
@@ -198,7 +199,7 @@ def check(scenario: dict) -> dict:
     if isinstance(period, bool) or not isinstance(period, (int, float)) or not (0 <= period <= 1.0):
         raise ConfigError(f"control_period_s must be 0 (the rig's) or a number of seconds in (0, 1], got {period!r}")
     for key, what in (("initial", "value"), ("initial_rate", "rate (unit/s)"),
-                      ("initial_acceleration", "acceleration (unit/s^2)")):
+                      ("initial_acceleration", "acceleration (unit/s^2)"), ("controller_state", "value")):
         if not isinstance(scenario[key], dict):
             raise ConfigError(f"{key} must be a table channel = {what}")
         for channel, value in scenario[key].items():

@@ -51,6 +51,7 @@ def _variant(data: Data, i: int, scale: float | None, stretch: float) -> dict:
         # recording caught: at its joints' first readings
         scenario["initial"] = {c: v for c, v in scenario["initial"].items() if c in data.rig.position_channels()}
         scenario["initial_rate"] = scenario["initial_acceleration"] = {}
+    scenario["controller_state"] = {}  # and its controller as it starts
     return scenario
 
 
