@@ -109,6 +109,20 @@ class Rig:
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint)
         return None if jid < 0 else int(self.model.jnt_dofadr[jid])
 
+    def _dof_of_qpos(self, q: int) -> int:
+        """The dof address of the joint at qpos address q (a hinge or slide)."""
+        return int(self.model.jnt_dofadr[list(self.model.jnt_qposadr).index(q)])
+
+    def _chain(self, ids: list[int], length: float, origin: int) -> list[tuple[int, int, float]]:
+        """(qpos address, dof address, lever arm m) of each joint in `ids`, the arm `length` less the joint's distance
+        from joint `origin`'s anchor with the model in its reference pose (the links straight): where a tip load's
+        moment bends the chain."""
+        straight = mujoco.MjData(self.model)
+        mujoco.mj_kinematics(self.model, straight)
+        root = straight.xanchor[origin]
+        return [(int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]),
+                 length - float(np.linalg.norm(straight.xanchor[j] - root))) for j in ids]
+
 
 class LaserArmRig(Rig):
     """rigs.md §1: hub encoder, tip (laser spot) sensor, voltage drive with current monitor."""
@@ -140,20 +154,12 @@ class LaserArmRig(Rig):
         deflection = length * first.get("reference", 0.0) - tip / gain - length * self.data.qpos[self._hub_q]  # m
         speed = (length * rates.get("reference", 0.0) - rates.get("tip_sensor", 0.0) / gain
                  - length * self.data.qvel[self._hub_v])  # m/s
-        hinges = self._beam_hinges()
+        hinges = self._chain([j for j in range(self.model.njnt) if self.model.joint(j).name.startswith("beam_j")],
+                             length, self.model.joint("hub").id)
         norm = sum(arm * arm for _q, _v, arm in hinges)
         for q, v, arm in hinges:  # w(L) = sum q_i (L - x_i), q_i proportional to the tip load's moment (L - x_i)
             self.data.qpos[q], self.data.qvel[v] = deflection * arm / norm, speed * arm / norm
         mujoco.mj_forward(self.model, self.data)
-
-    def _beam_hinges(self) -> list[tuple[int, int, float]]:
-        """(qpos address, dof address, distance to the tip sensor's point, m) of each beam hinge, the beam straight."""
-        straight = mujoco.MjData(self.model)
-        mujoco.mj_kinematics(self.model, straight)
-        hub = straight.xanchor[self.model.joint("hub").id]
-        ids = [j for j in range(self.model.njnt) if self.model.joint(j).name.startswith("beam_j")]
-        return [(int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]),
-                 self._length - float(np.linalg.norm(straight.xanchor[j] - hub))) for j in ids]
 
     def hub_velocity(self) -> float:
         """Hub speed (rad/s); 0 when the hub is locked."""
@@ -263,10 +269,6 @@ class WatflexRig(Rig):
             bent = True
         if bent:
             mujoco.mj_forward(self.model, self.data)
-
-    def _dof_of_qpos(self, q: int) -> int:
-        """The dof address of the joint at qpos address q (a hinge)."""
-        return int(self.model.jnt_dofadr[list(self.model.jnt_qposadr).index(q)])
 
     def _gauge_weights(self, link: int, x_gauge: float):
         """Curvature at x_gauge (1/m) = wa q_a + wb q_b over the two nearest hinges (linear inter/extrapolation).
@@ -378,12 +380,7 @@ class GenericRig(Rig):
         name = spec["link"]
         ids = [j for j in range(self.model.njnt) if self.model.joint(j).name == name
                or self.model.joint(j).name.startswith(f"{name}_j")]
-        if not ids:
-            return []
-        anchors = [self.data.xanchor[j].copy() for j in ids]
-        length = float(spec.get("length", 1.0))
-        return [(int(self.model.jnt_qposadr[j]), int(self.model.jnt_dofadr[j]),
-                 length - float(np.linalg.norm(a - anchors[0]))) for j, a in zip(ids, anchors)]
+        return self._chain(ids, float(spec.get("length", 1.0)), ids[0]) if ids else []
 
     def _sensor(self, spec):
         """(kind, index/weights, scale, offset, step, noise, filter coefficient) or None if absent."""
@@ -464,7 +461,6 @@ class GenericRig(Rig):
         at `rates` (channel -> unit/s; at rest without one): joint positions and velocities, and each link bent
         in its static tip-load shape."""
         rates = rates or {}
-        dof = {int(a): int(d) for a, d in zip(self.model.jnt_qposadr, self.model.jnt_dofadr)}  # qpos -> dof address
         for channel, kind, index, scale, offset, _step, _noise, _alpha in self._measured:
             if channel not in first or not math.isfinite(first[channel]) or kind == "current":
                 continue
@@ -473,7 +469,7 @@ class GenericRig(Rig):
             if kind == "position":
                 self.data.qpos[index] = x
                 if rate:
-                    self.data.qvel[dof[index]] = rate
+                    self.data.qvel[self._dof_of_qpos(index)] = rate
             elif kind == "velocity":
                 self.data.qvel[index] = x
             else:  # q_i = c w_i with sum w_i q_i = x: the least-norm shape, a tip-load shape for a chain
@@ -481,7 +477,7 @@ class GenericRig(Rig):
                 for q, w in index:
                     self.data.qpos[q] = x * w / norm
                     if rate:
-                        self.data.qvel[dof[q]] = rate * w / norm
+                        self.data.qvel[self._dof_of_qpos(q)] = rate * w / norm
         mujoco.mj_forward(self.model, self.data)
 
     def actuate(self, command: dict[str, float]) -> dict[str, float]:
