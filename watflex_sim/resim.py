@@ -74,10 +74,12 @@ START_KEYS = ("initial", "initial_rate", "initial_acceleration", "controller_sta
 
 
 def _start_as_recorded(rec: Recording, rig: RigDescription, at_rest: dict) -> dict:
-    """`at_rest` started as the recording starts: moving, every start sensor at the value, rate and acceleration a
-    parabola through its first START_WINDOW_S gives (_start), where one of them moves (_moving); its controller in the
-    state its first commands say (_controller_start), where it has one the run would not start it in. Each is kept
-    only where the nominal model started so follows the recording's first JUDGE_S closer (a step at or just after the
+    """`at_rest` started as the recording starts: at rest but loaded, the links bent as the start sensors read that
+    are further from the nominal pose than an offset (_away_from_nominal: a load held against friction); moving, every
+    start sensor at the value, rate and acceleration a parabola through its first START_WINDOW_S gives (_start),
+    where one of them moves (_moving); its controller in the state its first commands say (_controller_start), where
+    it has one the run would not start it in. Each is kept only where the nominal model started so follows the
+    recording's first JUDGE_S closer than the rest (a step at or just after the
     first sample moves an arm at rest as fast, on a motor quicker than the window; measured: a laser step 0-10 ms in
     and Watflex steps 0-10 ms in read as moving by their parabolas alone). The choice is made once per recording (per
     process), on the nominal model, so every model a diagnosis simulates starts alike."""
@@ -87,6 +89,10 @@ def _start_as_recorded(rec: Recording, rig: RigDescription, at_rest: dict) -> di
     chosen = _STARTS.get(key)
     if chosen is None:
         options = [at_rest]
+        bent = {c: _first(rec.channels[c]) for c in rig.start_channels() if c in rec.channels
+                and c not in at_rest["initial"] and _away_from_nominal(rec.channels[c])}
+        if bent:  # at rest, loaded: the links bent as their sensors read
+            options.append(dict(at_rest, initial={**at_rest["initial"], **bent}))
         starts = {c: _start(rec.time, rec.channels[c]) for c in rig.start_channels() if c in rec.channels}
         if any(_moving(rec.time, rec.channels[c], starts[c][1], starts[c][3]) for c in starts):
             moving = copy.deepcopy(at_rest)
@@ -186,8 +192,8 @@ def _rms(x: np.ndarray) -> float:
 
 
 def _start_misfit(rec: Recording, rig: RigDescription, scenario: dict) -> float:
-    """Sum over the recording's measured channels of the mean squared misfit, in the channel's spread, of the nominal
-    model run from `scenario`'s start over the recording's first JUDGE_S (inf where it diverges)."""
+    """Sum over the recording's measured and command channels of the mean squared misfit, in the channel's spread, of
+    the nominal model run from `scenario`'s start over the recording's first JUDGE_S (inf where it diverges)."""
     period = float(scenario["control_period_s"])
     short = dict(scenario, duration_s=min(float(scenario["duration_s"]), round(JUDGE_S / period) * period))
     try:
@@ -198,7 +204,7 @@ def _start_misfit(rec: Recording, rig: RigDescription, scenario: dict) -> float:
     part = Recording(rec.time[within], {c: v[within] for c, v in rec.channels.items()}, rec.meta)
     sampled = _sampled(part, sim)  # at the recording's own times (a logger's rate may differ from the loop's)
     total = 0.0
-    for c in rig.of_kind("measured"):
+    for c in rig.of_kind("measured") + rig.of_kind("command"):  # a closed loop's commands are its response too
         if c in part.channels and c in sampled.channels:
             x, y = part.channels[c], sampled.channels[c]
             spread = float(np.nanstd(rec.channels[c]))
