@@ -70,7 +70,8 @@ def test_an_arm_held_still_by_friction_starts_bent_and_its_integral_charged():
     again = resim.resimulate(rec)
     assert max(nrmse(rec.channels[c], again.channels[c]) for c in ("elbow_angle", "elbow_torque_cmd")) < 0.3
     assert _worst(rec, again) < 0.6
-    before = dict(start, initial={c: v for c, v in start["initial"].items() if c.endswith("_angle")}, controller_state={})
+    encoders = {c: v for c, v in start["initial"].items() if c.endswith("_angle")}
+    before = dict(start, initial=encoders, controller_state={})
     assert _worst(rec, simulate(check(before)).recording) > 1.0
 
 

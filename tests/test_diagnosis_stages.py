@@ -1131,9 +1131,9 @@ def test_a_later_finding_the_rest_explain_when_carried_on_is_dropped(monkeypatch
 def test_a_friction_finding_the_rigs_friction_scale_explains_is_parameter_error(monkeypatch):
     """settle.spare_for_a_rig_parameter(): seed 103's clean two-joint watflex-0a7fefae (shoulder friction x1.046, the
     refit stuck at x1.010) found a shoulder Coulomb friction of 0.32 / 0.29 N m. Without it, the shoulder's friction
-    scale tried at 9 ratios across its 5 % tolerance: where one (here x1.0375) is within the noise (NOISE_MARGIN 1.3) the
-    finding is dropped and that ratio kept; where none is (a 1.2 N m Coulomb friction: 25 x the noise at best), or the
-    finding is not a friction effect at a joint with a friction scale, nothing changes."""
+    scale tried at 9 ratios across its 5 % tolerance: where one (here x1.0375) is within the noise (NOISE_MARGIN 1.3)
+    the finding is dropped and that ratio kept; where none is (a 1.2 N m Coulomb friction: 25 x the noise at best), or
+    the finding is not a friction effect at a joint with a friction scale, nothing changes."""
     from types import SimpleNamespace
 
     from watflex_sim.diagnosis import settle

@@ -79,10 +79,10 @@ def _start_as_recorded(rec: Recording, rig: RigDescription, at_rest: dict) -> di
     start sensor at the value, rate and acceleration a parabola through its first START_WINDOW_S gives (_start),
     where one of them moves (_moving); its controller in the state its first commands say (_controller_start), where
     it has one the run would not start it in. Each is kept only where the nominal model started so follows the
-    recording's first JUDGE_S closer than the rest (a step at or just after the
-    first sample moves an arm at rest as fast, on a motor quicker than the window; measured: a laser step 0-10 ms in
-    and Watflex steps 0-10 ms in read as moving by their parabolas alone). The choice is made once per recording (per
-    process), on the nominal model, so every model a diagnosis simulates starts alike."""
+    recording's first JUDGE_S closer than the rest (a step at or just after the first sample moves an arm at rest as
+    fast, on a motor quicker than the window; measured: a laser step 0-10 ms in and Watflex steps 0-10 ms in read as
+    moving by their parabolas alone). The choice is made once per recording (per process), on the nominal model, so
+    every model a diagnosis simulates starts alike."""
     judged = int(np.searchsorted(rec.time, rec.time[0] + JUDGE_S))  # the samples the choice compares
     key = (rig.name, rig.source, len(rec.time), rec.time[:judged].tobytes(),
            tuple((c, x[:judged].tobytes()) for c, x in rec.channels.items()))

@@ -11,8 +11,8 @@ fit of the same findings if there was one, and the floors measured again without
 where a finding had raised them. Before it is judged, a model short of the noise but near it is carried on by the
 pattern search on the training blocks (pattern.pattern_polish). Of two or more findings, one that the rest and the
 rig's parameters carried on by that search explain as well is dropped (`spare_a_later_finding`); so is a friction
-finding that the rig's friction scale at its joint explains within its tolerance (`spare_for_a_rig_parameter`). `steps` and
-`rejected` (the report's lists) get what happened appended.
+finding that the rig's friction scale at its joint explains within its tolerance (`spare_for_a_rig_parameter`).
+`steps` and `rejected` (the report's lists) get what happened appended.
 """
 from __future__ import annotations
 
