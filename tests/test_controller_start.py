@@ -9,6 +9,8 @@ import pytest
 import watflex_sim.resim as resim
 from controllers.observer import Observer
 from controllers.pid import PID
+from watflex_sim.diagnosis.data import prepare
+from watflex_sim.diagnosis.experiment import _variant
 from watflex_sim.engine import simulate
 from watflex_sim.metrics import nrmse
 from watflex_sim.model import ConfigError
@@ -61,7 +63,8 @@ def test_an_arm_held_still_by_friction_starts_bent_and_its_integral_charged():
     """The elbow PID with a slow integral (ki 20 N m/(rad s)), noise on, stuck by the harmonic drive's friction 3 s
     in and cut there: it starts at rest, link 2 bent as its bridges read (a load held: they read beyond any offset)
     and the integral as the commands say (measured NRMSE: angle 0.054, torque 0.22, strains 0.40, the friction's
-    stick-slip left; at rest with links straight and the integral empty, as before, 0.72, 1.48 and 1.25)."""
+    stick-slip left; at rest with links straight and the integral empty, as before, 0.72, 1.48 and 1.25). An experiment
+    the diagnosis proposes from it starts at the joints' readings, links straight, its controller reset."""
     scenario = load_scenario("watflex_elbow_step", ["duration_s=6.0"])
     rec = _cut(simulate(check(scenario | {"controller": dict(ELBOW_PID, ki=20.0)})).recording, 3.0)
     start = resim.scenario_from_recording(rec)
@@ -73,6 +76,8 @@ def test_an_arm_held_still_by_friction_starts_bent_and_its_integral_charged():
     encoders = {c: v for c, v in start["initial"].items() if c.endswith("_angle")}
     before = dict(start, initial=encoders, controller_state={})
     assert _worst(rec, simulate(check(before)).recording) > 1.0
+    proposed = _variant(prepare([rec], ["held.csv"]), 0, 2.0, 1.0)  # what the rig would run: straight, reset
+    assert set(proposed["initial"]) == set(encoders) and proposed["controller_state"] == {}
 
 
 def test_a_recording_from_the_controllers_start_sets_no_state():

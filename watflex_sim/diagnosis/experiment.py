@@ -47,8 +47,8 @@ def _variant(data: Data, i: int, scale: float | None, stretch: float) -> dict:
                 signal["values"] = (v0 + moved).tolist()
                 signal["time_s"] = (np.asarray(signal["time_s"]) * stretch).tolist()
     scenario["duration_s"] = float(scenario["duration_s"]) * stretch
-    if scenario["initial_rate"]:  # an experiment run on the rig starts at rest, its links straight, whatever the
-        # recording caught: at its joints' first readings
+    if scenario["initial_rate"] or data.rig.sensors != "generic":  # an experiment run on the rig starts at rest,
+        # its links straight, whatever the recording caught (moving, or a load held): at its joints' first readings
         scenario["initial"] = {c: v for c, v in scenario["initial"].items() if c in data.rig.position_channels()}
         scenario["initial_rate"] = scenario["initial_acceleration"] = {}
     scenario["controller_state"] = {}  # and its controller as it starts
