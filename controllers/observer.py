@@ -164,12 +164,15 @@ class ObserverJoint:
         the first step (which starts at rest at its encoder reading)."""
         if self._predicted is None:
             return {}
-        names = ("theta", "rate") if self.rigid else ("theta_m", "theta_a", "rate_m", "rate_a")
-        return {**dict(zip(names, self._predicted)), "torque": self.tau}
+        return {**dict(zip(self._state_names(), self._predicted)), "torque": self.tau}
+
+    def _state_names(self) -> tuple[str, ...]:
+        """The prediction's names, in its order (rad, rad/s)."""
+        return ("theta", "rate") if self.rigid else ("theta_m", "theta_a", "rate_m", "rate_a")
 
     def set_state(self, values: Mapping[str, float]) -> None:
         """Set the state `state` names (every name of it; ValueError otherwise)."""
-        names = ("theta", "rate") if self.rigid else ("theta_m", "theta_a", "rate_m", "rate_a")
+        names = self._state_names()
         if set(values) != {*names, "torque"}:
             raise ValueError(f"observer state needs {', '.join((*names, 'torque'))}, got {', '.join(values) or 'none'}")
         self._predicted, self.tau = [float(values[n]) for n in names], float(values["torque"])

@@ -123,16 +123,17 @@ def _controller_start(rec: Recording, rig: RigDescription, scenario: dict) -> di
     n = int(round(JUDGE_S / period))
     if len(rec.time) < n or not np.allclose(np.diff(rec.time[:n]), period, rtol=1e-3, atol=0.0):
         return {}
-    commands = [c for c in rig.of_kind("command") if c in rec.channels and float(np.nanstd(rec.channels[c])) > 0]
-    rows = [{c: float(x[k]) for c, x in rec.channels.items() if c not in rig.of_kind("command")} for k in range(n)]
-    recorded = {c: rec.channels[c][:n] for c in commands}
-    usable = {c: np.isfinite(x) & (x != np.nanmax(rec.channels[c])) & (x != np.nanmin(rec.channels[c]))
-              for c, x in recorded.items()}
-    spread = {c: float(np.nanstd(rec.channels[c])) for c in commands}
-    warm = {c: (r, scenario["initial_acceleration"].get(c, 0.0)) for c, r in scenario["initial_rate"].items()}
+    spread = {c: float(np.nanstd(rec.channels[c])) for c in rig.of_kind("command") if c in rec.channels}
+    commands = [c for c, s in spread.items() if s > 0]
     controller = make_controller(scenario, rig, period)
     if not commands or not hasattr(controller, "set_state"):
         return {}
+    inputs = {c: x[:n].tolist() for c, x in rec.channels.items() if c not in spread}
+    rows = [{c: x[k] for c, x in inputs.items()} for k in range(n)]
+    recorded = {c: rec.channels[c][:n] for c in commands}
+    usable = {c: np.isfinite(x) & (x != np.nanmax(rec.channels[c])) & (x != np.nanmin(rec.channels[c]))
+              for c, x in recorded.items()}
+    warm = {c: (r, scenario["initial_acceleration"].get(c, 0.0)) for c, r in scenario["initial_rate"].items()}
 
     def misfit(start, values: dict | None, samples: int) -> np.ndarray:
         """The replay's misfit per usable command sample (in spreads) from `start` (a copy is run), set to values."""

@@ -159,9 +159,9 @@ def spare_for_a_rig_parameter(data: Data, runner: Runner, model: Model, ablated:
                     trials.append((fit_scores(data, sims, "train")["noise_ratio"], trial, sims))
         if not trials:
             continue
-        _score, best, sims = min(trials, key=lambda t: t[0])
+        score, best, sims = min(trials, key=lambda t: t[0])
         say("elimination", f"would the rig's {', '.join(names)} within tolerance explain the data without "
-            f"{effect['effect']} at {effect['where']} (training {_score:.2f} x the noise at the best of "
+            f"{effect['effect']} at {effect['where']} (training {score:.2f} x the noise at the best of "
             f"{len(trials)} ratios)?")
         carried, sims = pattern_polish(data, runner, best, sims, say,
                                        f"the model without {effect['effect']} at {effect['where']}")
