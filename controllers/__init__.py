@@ -19,6 +19,8 @@ from .pid import PID  # noqa: E402
 from .state_feedback import StateFeedback  # noqa: E402
 CONTROLLERS["state_feedback"] = StateFeedback  # u = K (x_ref - x) on any named channels (issue 15)
 CONTROLLERS["pid"] = PID  # PID on any named channels (issue 15)
+from .linear import Linear  # noqa: E402
+CONTROLLERS["linear"] = Linear  # a discrete state space or transfer functions on named channels (a lab's LQG, H-inf)
 
 __all__ = ["CascadeP", "Controller", "FuzzyPD", "Observer", "OpenLoop", "Passivity", "PDJoint", "PDTip", "PIVelocity", "PID",
-           "StateFeedback", "CONTROLLERS"]
+           "StateFeedback", "Linear", "CONTROLLERS"]

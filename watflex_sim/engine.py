@@ -2,6 +2,7 @@
 zero-order hold over physics substeps."""
 from __future__ import annotations
 
+import copy
 import hashlib
 import inspect
 import logging
@@ -57,8 +58,10 @@ def make_controller(scenario: dict, rig: RigDescription, period: float = CONTROL
     sign = 1.0 if scenario["direction"] == "positive" else -1.0
     if kind in ("none", "open_loop"):
         return OpenLoop({c["channel"]: make_signal(c, sign) for c in scenario["command"]})
+    if kind == "parallel":  # controllers/parallel.py: each part a controller table of its own
+        return _parallel(spec, scenario, rig, period)
     if kind not in CONTROLLERS:
-        raise ConfigError(f"unknown controller type {kind!r} (known: none, {', '.join(CONTROLLERS)})")
+        raise ConfigError(f"unknown controller type {kind!r} (known: none, parallel, {', '.join(CONTROLLERS)})")
     compensation = spec.pop("compensation", None)
     if "period" not in spec and period != CONTROL_PERIOD and "period" in inspect.signature(CONTROLLERS[kind]).parameters:
         spec["period"] = period
@@ -71,6 +74,32 @@ def make_controller(scenario: dict, rig: RigDescription, period: float = CONTROL
         return controller
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"controller {kind!r}: {exc}") from None
+
+
+def _parallel(spec: dict, scenario: dict, rig: RigDescription, period: float):
+    """The parts of a `parallel` controller, each built as make_controller builds one; ConfigError where they are not
+    a list of controller tables or two drive the same command (each tried once, on a copy, on zero readings)."""
+    from .controllers.parallel import Parallel
+
+    parts = spec.pop("parts", None)
+    if spec or not isinstance(parts, list) or not parts or not all(isinstance(p, dict) and "type" in p for p in parts):
+        raise ConfigError("controller 'parallel': needs only `parts`, a list of controller tables, each with its type")
+    if any(p["type"] in ("parallel", "none", "open_loop") for p in parts):
+        raise ConfigError("controller 'parallel': a part must be a closed-loop controller (not parallel, none, open_loop)")
+    built = [make_controller({**scenario, "controller": p}, rig, period) for p in parts]
+    drives: dict[str, int] = {}
+    for i, part in enumerate(built):
+        trial = copy.deepcopy(part)
+        trial.reset()
+        try:
+            commands = trial(0.0, {c: 0.0 for c in rig.channels})
+        except KeyError:  # a channel the rig lacks: ControlLoop names it
+            continue
+        for command in commands:
+            if command in drives:
+                raise ConfigError(f"controller 'parallel': parts {drives[command]} and {i} both drive {command}")
+            drives[command] = i
+    return Parallel(built)
 
 
 def _references(scenario: dict, rig: RigDescription) -> dict[str, Callable[[float], float]]:

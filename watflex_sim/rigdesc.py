@@ -39,7 +39,7 @@ SENSORS = ("laser_arm", "watflex", "generic")
 # SI units a channel may carry (recordings.md section 1); "1" for a dimensionless channel.
 UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "1", "-", "deg", "deg/s", "mm")  # deg, mm: with a scale; "-" = "1"
 # Controller-table keys whose (string or list-of-string) values name channels of the rig.
-CHANNEL_ROLES = ("position", "reference", "command", "velocity", "deflection", "measured", "output",
+CHANNEL_ROLES = ("position", "reference", "command", "commands", "velocity", "deflection", "measured", "output",
                  "channel", "channels", "states", "inputs", "outputs")
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
@@ -247,9 +247,12 @@ def _check(raw: dict, source: str, default_name: str = "") -> RigDescription:
     tables = {"controller": raw.get("controller", {"type": "none"})}
     if isinstance(raw.get("sidecar"), dict) and "controller" in raw["sidecar"]:
         tables["sidecar.controller"] = raw["sidecar"]["controller"]
+    for where, table in list(tables.items()):  # a parallel controller's parts checked as tables of their own
+        if isinstance(table, dict) and table.get("type") == "parallel" and isinstance(table.get("parts"), list):
+            tables |= {f"{where}.parts[{i}]": part for i, part in enumerate(table["parts"])}
     for where, table in tables.items():
-        if not isinstance(table, dict) or table.get("type") not in ("none", "open_loop", *CONTROLLERS):
-            fail(f"{where}: type must be one of none, open_loop, {', '.join(CONTROLLERS)}, "
+        if not isinstance(table, dict) or table.get("type") not in ("none", "open_loop", "parallel", *CONTROLLERS):
+            fail(f"{where}: type must be one of none, open_loop, parallel, {', '.join(CONTROLLERS)}, "
                  f"got {table.get('type') if isinstance(table, dict) else table!r}")
         for role in CHANNEL_ROLES:
             value = table.get(role)

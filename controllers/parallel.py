@@ -1,0 +1,51 @@
+"""Several controllers side by side, each driving its own commands (a rig whose joints run different laws, or
+at different rates: the lab's LQG at 10 ms on stage 1 beside Quanser's state feedback at 2 ms on stage 2).
+
+As data: `type = "parallel"`, `parts = [{type = ..., ...}, ...]`, each part a controller table of its own
+(engine.make_controller builds them); no two parts may drive the same command.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+
+class Parallel:
+    """Every part called each control period on the same measured channels; their commands merged."""
+
+    def __init__(self, parts: Sequence):
+        if not parts:
+            raise ValueError("parallel needs at least one part")
+        self.parts = list(parts)
+
+    def reset(self) -> None:
+        for part in self.parts:
+            part.reset()
+
+    def channels(self) -> set[str]:
+        """The measured channels the parts read (those that say)."""
+        return set().union(*(part.channels() for part in self.parts if hasattr(part, "channels")))
+
+    def state(self) -> dict[str, float]:
+        """The parts' states (controllers.base.StatefulController) as "PART:NAME", PART the part's index."""
+        return {f"{i}:{name}": value for i, part in enumerate(self.parts) if hasattr(part, "state")
+                for name, value in part.state().items()}
+
+    def set_state(self, values: Mapping[str, float]) -> None:
+        """Set the parts' states by "PART:NAME" (ValueError for a name no part has)."""
+        unknown = set(values) - set(self.state())
+        if unknown:
+            raise ValueError(f"parallel state has {', '.join(self.state()) or 'nothing'}, got {', '.join(sorted(unknown))}")
+        for i, part in enumerate(self.parts):
+            mine = {name.partition(":")[2]: v for name, v in values.items() if name.partition(":")[0] == str(i)}
+            if mine:
+                part.set_state(mine)
+
+    def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for part in self.parts:
+            commands = part(t, obs)
+            twice = set(commands) & set(out)
+            if twice:
+                raise ValueError(f"parallel: two parts drive {', '.join(sorted(twice))}")
+            out.update(commands)
+        return out
