@@ -25,3 +25,12 @@ class StatefulController(Controller, Protocol):
     def state(self) -> dict[str, float]: ...
 
     def set_state(self, values: Mapping[str, float]) -> None: ...
+
+
+class SettlingController(Controller, Protocol):
+    """A controller with a state it would hold after long at constant readings (an observer's estimate, a filter's
+    memory): a run that starts at rest away from the nominal pose, as a recording cut from a longer run does, starts it
+    so (engine.ControlLoop) instead of at its reset."""
+
+    def settle(self, obs: Mapping[str, float]) -> None: ...
+

@@ -7,8 +7,9 @@ a multiple of the rig's control period; the commands held between, as a Simulink
     y = C x + D u,    x <- A x + B u,    commands = y clipped at `limits`
 
 with u the inputs in order: a channel's value, "rate:CHANNEL" its rate (state_feedback.RateFilter, run
-every control period), or "" for 0. The state starts at zero (Simulink's default) and can be set
-(controllers.base.StatefulController: "x0", "x1", ... in the law's own units).
+every control period), or "" for 0. The state starts at zero (Simulink's default), or where a run starts at rest
+away from the nominal pose (a recording cut from a longer run) as the law holds it at those readings (`settle`), and
+can be set (controllers.base.StatefulController: "x0", "x1", ... in the law's own units).
 """
 from __future__ import annotations
 
@@ -94,6 +95,13 @@ class Linear:
             raise ValueError(f"linear state has x0..x{len(self.x) - 1}, got {', '.join(sorted(unknown))}")
         for name, value in values.items():
             self.x[int(name[1:])] = float(value)
+
+    def settle(self, obs: Mapping[str, float]) -> None:
+        """x as the law holds it after long at these readings, at rest (rates 0): x = (I - A)^-1 B u, least squares
+        where A has a pole at 1 (an integrator's state, which the readings do not fix, at its least norm)."""
+        u = np.array([0.0 if s.startswith("rate:") or not s else obs[s] for s in self.inputs])
+        n = self.A.shape[0]
+        self.x = np.linalg.lstsq(np.eye(n) - self.A, self.B @ u, rcond=None)[0] if n else self.x
 
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         rates = {s: f(obs[s[5:]]) for s, f in self.rates.items()}  # every control period, as the rig filters

@@ -40,6 +40,12 @@ class Parallel:
             if mine:
                 part.set_state(mine)
 
+    def settle(self, obs: Mapping[str, float]) -> None:
+        """Each part that can (controllers.base.SettlingController) takes the state it holds at these readings."""
+        for part in self.parts:
+            if hasattr(part, "settle"):
+                part.settle(obs)
+
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         out: dict[str, float] = {}
         for part in self.parts:

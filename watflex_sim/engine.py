@@ -345,6 +345,7 @@ class ControlLoop:
         self.controller.reset()
         self._warm = {c: (float(r), float(accelerations.get(c, 0.0))) for c, r in rates.items()}  # a moving start
         self._controller_state = dict(scenario.get("controller_state") or {})  # set after the warm-up
+        self._settle = bool(initial) and hasattr(self.controller, "settle")  # controllers.base.SettlingController
         if self._controller_state and not hasattr(self.controller, "set_state"):
             raise ConfigError(f"controller_state: controller {scenario['controller']['type']!r} has no state to set")
         references = _references(scenario, description)
@@ -397,6 +398,8 @@ class ControlLoop:
         obs = self.rig.observe(self.references[k])
         if self.patch.sensor or self._sensor_fifo:
             obs = self._sense(obs)
+        if k == 0 and self._settle and not (self._warm or self._controller_state):
+            self.controller.settle(obs)  # at rest away from the nominal pose: as the law holds it there
         if k == 0 and (self._warm or self._controller_state):
             warm_up(self.controller, obs, self._warm, self.period)
             if self._controller_state:

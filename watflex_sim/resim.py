@@ -150,6 +150,8 @@ def _controller_start(rec: Recording, rig: RigDescription, scenario: dict) -> di
         controller.reset()
         if warm:
             warm_up(controller, rows[0], warm, period)
+        elif scenario["initial"] and hasattr(controller, "settle"):  # as engine.ControlLoop starts it at rest
+            controller.settle(rows[0])
         first = int(round(START_WINDOW_S / period))
         if _rms(misfit(controller, None, first)) <= STATE_TOLERANCE:
             return {}
