@@ -119,6 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--rrd", type=Path, help="also write a rerun recording here")
     plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     plot.add_argument("--rig", help=RIG_HELP + "; its default sidecar serves a file that comes without one")
+    plot.add_argument("--simulate", action="store_true",
+                      help="re-simulate the recording on the rig's nominal model, overlay it and print each channel's NRMSE")
+    plot.add_argument("--patch", type=Path, help="also (implies --simulate) a diagnosis' patch.json, e.g. one found on "
+                      "other recordings: does its model predict this one?")
 
     diag = sub.add_parser(
         "diagnose", help="find where recordings and the model differ, name the missing physics, fit it",
@@ -169,15 +173,21 @@ def _need_display(what: str) -> None:
                           "where there is one: rerun FILE.rrd")
 
 
+def _read_patch(path: Path) -> tuple[list[dict], dict[str, float]]:
+    """(effects, parameters) of a diagnosis' patch.json; ConfigError in one line for anything else."""
+    try:
+        patch = json.loads(path.read_text())
+        return list(patch["effects"]), dict(patch["parameters"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{path}: not a diagnosis patch.json ({exc})".replace("\n", " ")) from None
+
+
 def cmd_run(args) -> int:
     scenario = _scenario(args)
     if args.patch:
-        try:
-            patch = json.loads(args.patch.read_text())
-            scenario["effects"] = list(scenario["effects"]) + list(patch["effects"])
-            scenario["parameters"] = {**scenario["parameters"], **patch["parameters"]}
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise ConfigError(f"{args.patch}: not a diagnosis patch.json ({exc})".replace("\n", " ")) from None
+        effects, parameters = _read_patch(args.patch)
+        scenario["effects"] = list(scenario["effects"]) + effects
+        scenario["parameters"] = {**scenario["parameters"], **parameters}
     name = scenario["name"]
     rrd = None if args.no_rrd else (args.rrd or args.out / f"{name}.rrd")
     if args.spawn:
@@ -232,8 +242,23 @@ def cmd_plot(args) -> int:
     if args.rrd:
         writable(args.rrd.parent, "rrd directory")
     rec = _read(args.recording, _loaded_rig(args.rig))
+    models = {"nominal": ([], {})} if args.simulate or args.patch else {}
+    if args.patch:
+        models["patched"] = _read_patch(args.patch)
+    others = {}
+    for label, (effects, parameters) in models.items():
+        from .metrics import nrmse
+        from .resim import resimulate
+        from .rigdesc import load_rig
+
+        others[label] = sim = resimulate(rec, effects, parameters)
+        kinds = load_rig(rec.rig).channels
+        scores = {c: nrmse(x, sim.channels[c]) for c, x in rec.channels.items()
+                  if kinds.get(c, {}).get("kind") in ("measured", "command") and c in sim.channels}
+        print(f"{label} model: NRMSE " + ", ".join(f"{c} {v:.4f}" for c, v in scores.items() if math.isfinite(v))
+              + f"; mean {np.nanmean(list(scores.values())):.4f}")
     with staged(png.parent) as stage:
-        plot_recording(rec, stage / png.name)
+        plot_recording(rec, stage / png.name, others=others)
     print(f"wrote {png}")
     if args.rrd or args.spawn:
         _log_rerun(rec, args.rrd, args.spawn)
