@@ -152,6 +152,7 @@ class GenericColumns:
     def __init__(self, rigs: list[GenericRig], arrays: dict[str, np.ndarray], tip: int, n: int):
         first = rigs[0]
         self.qpos, self.qvel, self.ctrl, self.applied = arrays["qpos"], arrays["qvel"], arrays["ctrl"], arrays["qfrc_applied"]
+        self.sensordata = arrays["sensordata"]
         self.inputs, self.disturbances = first._inputs, first._disturbances
         self.measured = []  # (channel, kind, index, per-member numbers, filter), in the rig's order
         noisy = [[m[6] != 0 for m in r._measured] for r in rigs]
@@ -200,6 +201,8 @@ class GenericColumns:
                 actuator, dof = index
                 u = np.minimum(numbers["high"], np.maximum(numbers["low"], self.ctrl[:, actuator]))
                 x = np.clip((u - numbers["emf"] * qvel[:, dof]) * numbers["per_input"], -numbers["most"], numbers["most"])
+            elif kind == "sensor":
+                x = self.sensordata[:, index]
             else:
                 x = sum(w * qpos[:, q] for q, w in zip(index, numbers["weights"]))
             value = numbers["scale"] * x + numbers["offset"] + numbers["noise"] * self.gauss[k, m]

@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 LOCKSTEP_LEAST = 8  # simulations of one structure below which the single-run driver is cheaper
 LOCKSTEP_PER_CALL = 3  # ... and per Batch.step call a tick (_pays)
 COLUMNS_LEAST, COLUMNS_PER_CALL = 6, 1  # the same where the control half runs on arrays (columns.py)
-_ROWS = ("qpos", "qvel", "ctrl", "xpos", "site_xpos")  # the MjData fields rigs and the loop touch
+_ROWS = ("qpos", "qvel", "ctrl", "xpos", "site_xpos", "sensordata")  # the MjData fields rigs and the loop touch
 _SIZES = ("nq", "nv", "nu", "na", "nbody", "njnt", "ngeom", "nsite", "nsensordata", "neq", "ntendon",
           "nmocap", "nuserdata", "nM", "nD", "nB", "nC", "nJmom", "nbvh", "nbvhstatic", "nbvhdynamic", "npair",
           "nexclude", "nplugin", "nhistory")
@@ -141,7 +141,12 @@ class _Lockstep:
         self.bound_constraint = batch.bind("qfrc_constraint")
         self.applied = self.bound_applied.copy()  # what rigs apply (disturbances); friction is added to it
         arrays = {"qpos": self.qpos, "qvel": self.qvel, "ctrl": self.ctrl, "xpos": batch.bind("xpos"),
-                  "site_xpos": batch.bind("site_xpos"), "qfrc_applied": self.applied}
+                  "site_xpos": batch.bind("site_xpos"), "qfrc_applied": self.applied,
+                  # MuJoCo's sensors (an accelerometer): each set-up's for the first tick (not in the state), then
+                  # the batch's (read-only) copied after each tick's physics
+                  "sensordata": np.array([loop.data.sensordata for loop in loops])}
+        self.sensordata = arrays["sensordata"]
+        self.bound_sensordata = batch.bind("sensordata") if first.nsensordata else None
         self.disturbed = any(getattr(loop.rig, "_disturbances", None) for loop in loops)
         self.jittered = any(loop.delays is not None for loop in loops)  # commands due within a tick
         self.substepped = self.friction is not None or self.jittered  # one Batch.step per physics step
@@ -198,6 +203,8 @@ class _Lockstep:
                     self.constraint[:] = self.bound_constraint
                 if last:
                     break
+            if self.bound_sensordata is not None:
+                self.sensordata[:] = self.bound_sensordata
             if columns is not None:
                 columns.growth.update(k, live, failed)
             else:

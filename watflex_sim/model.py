@@ -138,10 +138,48 @@ def load_model(
             GRAVITY * math.sin(tilt_rad) * math.sin(tilt_azimuth_rad),
             -GRAVITY * math.cos(tilt_rad),
         ]
+    mount_accelerometers(spec, description)
     model = spec.compile()
     if not collidable(model):  # collision detection would find nothing, every step: skip it (same physics)
         model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     return model
+
+
+def mount_accelerometers(spec: mujoco.MjSpec, description) -> None:
+    """For each measured channel of quantity `acceleration`: a site `accelerometer_CHANNEL` at `x` (m, default the
+    link's `length`) along its `link` from the link's first hinge, its x axis along the link as it stands in the
+    reference pose, z along the hinge axis, and MuJoCo's accelerometer there (specific force: acceleration less
+    gravity, in the site's frame; rigs.GenericRig reads its y, across the link in the plane of motion). A link the
+    model lacks (an actuator bench) gets none."""
+    wanted = {c: s for c, s in description.channels.items()
+              if s.get("quantity") == "acceleration" and s["kind"] == "measured"}
+    if not wanted:
+        return
+    model = spec.copy().compile()  # the reference pose: the links straight
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)  # xaxis
+    for channel, s in wanted.items():
+        ids = [j for j in range(model.njnt) if model.joint(j).name == s["link"] or model.joint(j).name.startswith(f"{s['link']}_j")]
+        if not ids:
+            continue
+        anchors = data.xanchor[ids]
+        body = int(model.jnt_bodyid[ids[0]])
+        along = anchors[-1] - anchors[0] if len(ids) > 1 else data.xmat[body].reshape(3, 3)[:, 0]
+        along = along / np.linalg.norm(along)
+        x = float(s.get("x", s["length"]))
+        at = max(k for k in range(len(ids)) if np.linalg.norm(anchors[k] - anchors[0]) <= x + 1e-12)
+        body = int(model.jnt_bodyid[ids[at]])
+        frame = data.xmat[body].reshape(3, 3)  # columns: the body's axes in the world
+        normal = data.xaxis[ids[at]]
+        axes = frame.T @ np.column_stack([along, np.cross(normal, along), normal])  # the site's axes in the body's
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, axes.flatten())
+        site = f"accelerometer_{channel}"
+        spec.body(model.body(body).name).add_site(name=site, pos=frame.T @ (anchors[0] + x * along - data.xpos[body]),
+                                                  quat=quat, size=[0.004, 0, 0])
+        spec.add_sensor(name=site, type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                        objname=site)
 
 
 def collidable(model: mujoco.MjModel) -> bool:

@@ -45,9 +45,9 @@ KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "eff
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
         "control_jitter_s", "datasheet", "columns")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
-# velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, or the
-# current (A) of a datasheet drive (`actuator`).
-QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain", "current")
+# velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, the current (A) of a
+# datasheet drive (`actuator`), or an accelerometer's reading across a link at x (m/s^2; model.mount_accelerometers).
+QUANTITIES = ("position", "velocity", "deflection", "deflection_angle", "strain", "current", "acceleration")
 # Keys a channel may have (rigs.GenericRig reads them; the other sensor models read unit, kind, noise).
 CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", "step", "noise", "filter_hz",
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
@@ -366,15 +366,16 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
             fail(f"channel {channel!r}: quantity 'current' needs the actuator of a datasheet drive")
         return
     if "joint" not in spec and "link" not in spec:
-        fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain)")
-    if quantity in ("deflection", "deflection_angle", "strain") and "link" not in spec:
+        fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain, "
+             "acceleration)")
+    if quantity in ("deflection", "deflection_angle", "strain", "acceleration") and "link" not in spec:
         fail(f"channel {channel!r}: quantity {quantity!r} needs a link")
     if quantity in ("position", "velocity") and "joint" not in spec:
         fail(f"channel {channel!r}: quantity {quantity!r} needs a joint")
     if quantity == "strain" and not {"thickness", "length"} <= set(spec):
         fail(f"channel {channel!r}: a strain needs the link's thickness and length (m)")
-    if quantity == "deflection" and "length" not in spec:
-        fail(f"channel {channel!r}: a tip deflection needs the link's length (m)")
+    if quantity in ("deflection", "acceleration") and "length" not in spec:
+        fail(f"channel {channel!r}: a tip deflection or an acceleration needs the link's length (m)")
 
 
 @cache

@@ -347,7 +347,8 @@ class GenericRig(Rig):
     3 t w_tip (length - x) / (2 length^3) (a cantilever with a tip force).
     A `current` channel reads a datasheet drive's current (A) from the input held since the last
     tick: datasheet.current_law (current drive: the command after the amplifier limit; voltage
-    drive: (V - Ke w) / R, w the joint speed).
+    drive: (V - Ke w) / R, w the joint speed). An `acceleration` channel reads the accelerometer
+    model.mount_accelerometers put on its link, across the link (m/s^2), as the last physics step computed it.
     """
 
     def __init__(self, model, data, description, noise: bool, seed: int, period: float | None = None):
@@ -362,7 +363,7 @@ class GenericRig(Rig):
         mujoco.mj_kinematics(model, data)
         for channel, spec in description.channels.items():
             if spec["kind"] == "measured":
-                sensor = self._sensor(spec)
+                sensor = self._sensor(channel, spec)
                 if sensor is not None:
                     self._measured.append((channel, *sensor))
             elif spec["kind"] == "command":
@@ -382,12 +383,17 @@ class GenericRig(Rig):
                or self.model.joint(j).name.startswith(f"{name}_j")]
         return self._chain(ids, float(spec.get("length", 1.0)), ids[0]) if ids else []
 
-    def _sensor(self, spec):
+    def _sensor(self, channel: str, spec):
         """(kind, index/weights, scale, offset, step, noise, filter coefficient) or None if absent."""
         quantity = spec.get("quantity", "position")
         scale, offset = float(spec.get("scale", 1.0)), float(spec.get("offset", 0.0))
         step, noise = float(spec.get("step", 0.0)), self.noise * float(spec.get("noise", 0.0))
         alpha = _low_pass(float(spec.get("filter_hz", 0.0)), spec.get("filter_zeta"), self._period)
+        if quantity == "acceleration":  # model.mount_accelerometers: its y axis, across the link
+            sensor = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SENSOR, f"accelerometer_{channel}")
+            if sensor < 0:
+                return None
+            return "sensor", int(self.model.sensor_adr[sensor]) + 1, scale, offset, step, noise, alpha
         if quantity in ("position", "velocity"):
             index = self._qpos(spec["joint"]) if quantity == "position" else self._dof(spec["joint"])
             if index is None:
@@ -436,6 +442,8 @@ class GenericRig(Rig):
                 actuator, dof, low, high, emf, per_input, most = index
                 u = min(high, max(low, float(self.data.ctrl[actuator])))  # the input held since the last tick
                 x = clip((u - emf * qvel[dof]) * per_input, most)
+            elif kind == "sensor":  # MuJoCo's, computed at the last physics step
+                x = float(self.data.sensordata[index])
             else:
                 x = sum(w * qpos[q] for q, w in index)
             value = scale * x + offset + (noise * self.gauss() if noise else 0.0)
@@ -462,7 +470,7 @@ class GenericRig(Rig):
         in its static tip-load shape."""
         rates = rates or {}
         for channel, kind, index, scale, offset, _step, _noise, _alpha in self._measured:
-            if channel not in first or not math.isfinite(first[channel]) or kind == "current":
+            if channel not in first or not math.isfinite(first[channel]) or kind in ("current", "sensor"):
                 continue
             x = (first[channel] - offset) / scale
             rate = rates.get(channel, 0.0) / scale if math.isfinite(rates.get(channel, 0.0)) else 0.0
