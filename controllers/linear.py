@@ -71,6 +71,7 @@ class Linear:
             raise ValueError(f"limits must have one value per command ({len(self.commands)}), got {len(self.limits)}")
         self.rates = {s: RateFilter(float(rate_hz), float(rate_zeta), self.period, rate_method)
                       for s in self.inputs if s.startswith("rate:")}
+        self._step = np.block([[self.C, self.D], [self.A, self.B]])  # [y; x+] = this @ [x; u], one product a sample
         self.reset()
 
     def reset(self) -> None:
@@ -78,7 +79,7 @@ class Linear:
             f.reset()
         self.x = np.zeros(self.A.shape[0])
         self.k = 0
-        self.held = np.zeros(len(self.commands))
+        self.held = [0.0] * len(self.commands)
 
     def channels(self) -> set[str]:
         """The measured channels the law reads."""
@@ -106,11 +107,13 @@ class Linear:
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         rates = {s: f(obs[s[5:]]) for s, f in self.rates.items()}  # every control period, as the rig filters
         if self.k % self.every == 0:
-            u = np.array([rates[s] if s in rates else obs[s] if s else 0.0 for s in self.inputs])
-            self.held = np.clip(self.C @ self.x + self.D @ u, -self.limits, self.limits)
-            self.x = self.A @ self.x + self.B @ u
+            u = [rates[s] if s in rates else obs[s] if s else 0.0 for s in self.inputs]
+            out = self._step @ np.concatenate((self.x, u))
+            p = len(self.commands)
+            self.held = [min(lim, max(-lim, y)) for y, lim in zip(out[:p].tolist(), self.limits.tolist())]
+            self.x = out[p:]
         self.k += 1
-        return {c: float(y) for c, y in zip(self.commands, self.held)}
+        return dict(zip(self.commands, self.held))
 
 
 def _shaped(A, B, C, D, m: int, p: int) -> tuple[np.ndarray, ...]:
