@@ -247,3 +247,18 @@ def test_the_shipped_lqg_scenario_steps_hub_1_as_the_labs_rig_does():
     nominal = simulate({**scenario, "effects": [], "parameters": {}}).recording
     swing = [np.ptp(nominal.channels["link1"][(nominal.time >= a) & (nominal.time < a + 0.5)]) for a in (1.0, 2.5)]
     assert swing[1] > 1.2 * swing[0] > 0.02
+
+
+def test_a_friction_is_sized_by_the_effort_the_model_commands_where_no_command_is_recorded(tmp_path):
+    """The lab logged no current: a friction's catalogue bounds, in units of the peak actuator torque, take it from the
+    nominal model run on the recording's experiment: the LQG's 0.6 A clip through drive 1's 8.925 N m/A = 5.355 N m
+    (before, 1 N m by default, and the fits of the lab's runs sat on that bound: Coulomb 0.904 [0.52, 1] N m)."""
+    from types import SimpleNamespace
+
+    from watflex_sim.diagnosis.motion import simulated_effort
+    from watflex_sim.recording import read_recording
+
+    rec = read_recording(lab_runs.write(*lab_runs.stair(LAB, "lqg"), tmp_path / "lqg_stair"))
+    data = SimpleNamespace(recordings=[rec], rig=load_rig("quanser_2dsfl"), effort_memo=None)
+    assert "current1_cmd" not in rec.channels
+    assert simulated_effort(data) == pytest.approx(0.6 * 8.925, rel=1e-6)

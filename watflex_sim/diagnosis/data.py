@@ -83,6 +83,7 @@ class Data:
     discretisation_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what a
     # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
     motion_memo: list | None = None  # `motions`' answer, once asked
+    effort_memo: float | None = None  # motion.simulated_effort's answer, once asked
     glitches: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a logger's glitches left out
     held: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a slower sensor's held repeats
 

@@ -4,7 +4,8 @@ Contract: `motion_channel(rec, rig)` names the joint position that moves most in
 moving joint's encoder is not recorded); `motions(data)` gives each recording's (name, positions), simulated on the
 nominal model where only a reference says it; `peak_speed` its peak rate; `scale_of(data, param, where)` the size a
 scaled catalogue parameter is measured in (peak effort, effort per speed, a command's peak, a channel's spread, the
-motion's range); `peak` a robust peak of any signal.
+motion's range), the effort simulated on the nominal model where no command is recorded (`simulated_effort`); `peak`
+a robust peak of any signal.
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ def _position_spreads(rec: Recording, rig: RigDescription, kind: str) -> dict[st
 
 def scale_of(data: Data, param, where: str) -> float:
     """The size a scaled catalogue parameter is measured in (effects.Param.scale), from the data:
-    "effort" the peak actuator force or torque, "effort/speed" that over the peak speed,
+    "effort" the peak actuator force or torque (recorded, else `simulated_effort`), "effort/speed" that over the peak speed,
     "command" the peak of command channel `where`, "channel" the spread of channel `where`,
     "motion" the range of the motion channel."""
     if not param.scale:
@@ -56,7 +57,7 @@ def scale_of(data: Data, param, where: str) -> float:
             ranges.append(float(np.nanmax(rec.channels[motion]) - np.nanmin(rec.channels[motion])))
         if where in rec.channels:
             values.append(peak(rec.channels[where]) if param.scale == "command" else float(np.nanstd(rec.channels[where])))
-    effort = max(efforts, default=1.0) or 1.0
+    effort = max(efforts, default=0.0) or simulated_effort(data)
     if param.scale == "motion":
         return max(ranges, default=1.0) or 1.0
     if param.scale == "effort":
@@ -64,6 +65,24 @@ def scale_of(data: Data, param, where: str) -> float:
     if param.scale == "effort/speed":
         return effort / (peak_speed(data) or 1.0)
     return max(values, default=1.0) or 1.0
+
+
+def simulated_effort(data: Data) -> float:
+    """The peak actuator force or torque (N, N m) the nominal model commands in the recordings' experiments, where
+    no command is recorded (a lab that logged its arm's angles only); 1 where none can be simulated. A friction's
+    bounds scale with it: a fixed 1 N m held a Quanser drive's 100:1 harmonic drive (5 N m at 0.6 A) to a break-away
+    of at most 1 N m, which the fits of the lab's runs then sat on. Simulated once per Data, the first time asked."""
+    if data.effort_memo is None:
+        efforts = []
+        for rec in data.recordings:
+            try:
+                sim = simulate(scenario_from_recording(rec, data.rig), rig=data.rig).recording
+            except (ConfigError, SimulationError):
+                continue
+            efforts += [peak(sim.channels[c]) * data.rig.effort_per_unit(c) for c in data.rig.of_kind("command")
+                        if c in sim.channels]
+        data.effort_memo = max(efforts, default=0.0) or 1.0
+    return data.effort_memo
 
 
 def motions(data: Data) -> list[tuple[str, np.ndarray] | None]:
