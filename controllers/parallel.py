@@ -34,7 +34,8 @@ class Parallel:
         """Set the parts' states by "PART:NAME" (ValueError for a name no part has)."""
         unknown = set(values) - set(self.state())
         if unknown:
-            raise ValueError(f"parallel state has {', '.join(self.state()) or 'nothing'}, got {', '.join(sorted(unknown))}")
+            raise ValueError(f"parallel state has {', '.join(self.state()) or 'nothing'}, "
+                             f"got {', '.join(sorted(unknown))}")
         for i, part in enumerate(self.parts):
             mine = {name.partition(":")[2]: v for name, v in values.items() if name.partition(":")[0] == str(i)}
             if mine:

@@ -63,7 +63,8 @@ def test_a_run_records_the_accelerometers_alike_in_both_drivers(tmp_path, monkey
     monkeypatch.setenv("WATFLEX_RIGS", str(_rig_file(tmp_path)))
     scenario = {**load_scenario("quanser_lab_lqg_step"), "rig": "quanser_acc", "duration_s": 1.5}
     feedback = {**scenario, "effects": [], "parameters": {}, "controller": {
-        "type": "state_feedback", "commands": ["current1_cmd", "current2_cmd"], "states": ["hub1", "link1", "hub2", "link2"],
+        "type": "state_feedback", "commands": ["current1_cmd", "current2_cmd"],
+        "states": ["hub1", "link1", "hub2", "link2"],
         "references": {"hub1": "hub1_reference"}, "gains": [[15.81, -42.93, 0, 0], [0, 0, 15.81, -40.33]]}}
     for case, size in ((scenario, 2), (feedback, 8)):
         alone = simulate(case).recording
@@ -73,7 +74,8 @@ def test_a_run_records_the_accelerometers_alike_in_both_drivers(tmp_path, monkey
 
 
 @pytest.mark.parametrize("channel, message", [
-    ('a = { unit = "m/s^2", kind = "measured", quantity = "acceleration", length = 0.2 }', "or a link .deflection, strain, acceleration"),
+    ('a = { unit = "m/s^2", kind = "measured", quantity = "acceleration", length = 0.2 }',
+     "or a link .deflection, strain, acceleration"),
     ('a = { unit = "m/s^2", kind = "measured", link = "link1", quantity = "acceleration" }', "needs the link's length"),
 ])
 def test_an_accelerometer_without_its_place_fails_in_one_line(tmp_path, channel, message):

@@ -138,7 +138,8 @@ def test_a_linear_state_can_be_read_and_set():
 @pytest.mark.parametrize("table, message", [
     ({"commands": ["current1_cmd"], "inputs": ["hub1"], "A": [[1, 0], [0, 1]], "B": [1, 2, 3], "C": [[1, 0]], "D": [0]},
      "B must be 2 x 1"),
-    ({"commands": ["current1_cmd"], "inputs": ["hub1"], "A": [1, 2, 3], "B": [1], "C": [1], "D": [0]}, "A must be square"),
+    ({"commands": ["current1_cmd"], "inputs": ["hub1"], "A": [1, 2, 3], "B": [1], "C": [1], "D": [0]},
+     "A must be square"),
     ({"commands": ["current1_cmd"], "inputs": ["hub1"], "num": [1, 2, 3], "den": [1, 1]}, "improper"),
     ({"commands": ["current1_cmd"], "inputs": ["hub1"], "D": [2.0], "period_s": 0.003}, "whole number of control"),
     ({"commands": ["current1_cmd"], "inputs": ["hub1"], "D": [2.0], "domain": "w"}, "domain must be one of z, s"),
@@ -195,7 +196,8 @@ def test_a_model_diagnosed_on_quansers_runs_predicts_the_labs_lqg_runs(tmp_path)
 
     effects = [{"effect": "link_stiffness_change", "where": "link2", "ratio": 0.3544},
                {"effect": "joint_compliance", "where": "drive1", "stiffness": 59.26}]
-    parameters = {"drive1_damping": 0.7547, "drive2_damping": 0.75, "link1_stiffness": 0.9917, "link2_stiffness": 1.0672}
+    parameters = {"drive1_damping": 0.7547, "drive2_damping": 0.75, "link1_stiffness": 0.9917,
+                  "link2_stiffness": 1.0672}
     rec = read_recording(lab_runs.write(*lab_runs.stair(LAB, "lqg"), tmp_path / "lqg_stair"))
     assert rec.time.size == 20000 and np.allclose(np.diff(rec.time), 0.002)  # ten 4 s files at 500 Hz, from rest
     assert rec.channels["hub1"][0] == 0.0 and math.isclose(rec.channels["hub1_reference"][-1], 0.0)

@@ -88,13 +88,15 @@ def write(samples: np.ndarray, sidecar: dict, stem: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawTextHelpFormatter)
     parser.add_argument("--controller", nargs="+", choices=("lqg", "hinf"), default=["lqg", "hinf"])
     parser.add_argument("--data", type=Path, default=DATA, help=f"the lab's files (default {DATA.relative_to(ROOT)})")
     parser.add_argument("--out", type=Path, default=Path("runs/quanser_lab"), help="where the recordings and figure go")
     parser.add_argument("--rig", default="quanser_2dsfl", help="the rig the sidecars name (a variant on WATFLEX_RIGS)")
     parser.add_argument("--limit", type=float, default=None, help="stage 1's current clip, A (default the design's)")
-    parser.add_argument("--patch", type=Path, help="a diagnosis' patch.json (of other runs): its model predicts these too")
+    parser.add_argument("--patch", type=Path,
+                        help="a diagnosis' patch.json (of other runs): its model predicts these too")
     args = parser.parse_args(argv)
     try:
         patch = json.loads(args.patch.read_text()) if args.patch else None

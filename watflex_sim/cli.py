@@ -120,7 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     plot.add_argument("--rig", help=RIG_HELP + "; its default sidecar serves a file that comes without one")
     plot.add_argument("--simulate", action="store_true",
-                      help="re-simulate the recording on the rig's nominal model, overlay it and print each channel's NRMSE")
+                      help="re-simulate the recording on the rig's nominal model, overlay it and print each "
+                      "channel's NRMSE")
     plot.add_argument("--patch", type=Path, help="also (implies --simulate) a diagnosis' patch.json, e.g. one found on "
                       "other recordings: does its model predict this one?")
 

@@ -85,7 +85,8 @@ def _parallel(spec: dict, scenario: dict, rig: RigDescription, period: float):
     if spec or not isinstance(parts, list) or not parts or not all(isinstance(p, dict) and "type" in p for p in parts):
         raise ConfigError("controller 'parallel': needs only `parts`, a list of controller tables, each with its type")
     if any(p["type"] in ("parallel", "none", "open_loop") for p in parts):
-        raise ConfigError("controller 'parallel': a part must be a closed-loop controller (not parallel, none, open_loop)")
+        raise ConfigError("controller 'parallel': a part must be a closed-loop controller "
+                          "(not parallel, none, open_loop)")
     built = [make_controller({**scenario, "controller": p}, rig, period) for p in parts]
     drives: dict[str, int] = {}
     for i, part in enumerate(built):

@@ -160,7 +160,8 @@ def mount_accelerometers(spec: mujoco.MjSpec, description) -> None:
     mujoco.mj_kinematics(model, data)
     mujoco.mj_comPos(model, data)  # xaxis
     for channel, s in wanted.items():
-        ids = [j for j in range(model.njnt) if model.joint(j).name == s["link"] or model.joint(j).name.startswith(f"{s['link']}_j")]
+        ids = [j for j in range(model.njnt)
+               if model.joint(j).name == s["link"] or model.joint(j).name.startswith(f"{s['link']}_j")]
         if not ids:
             continue
         anchors = data.xanchor[ids]

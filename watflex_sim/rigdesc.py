@@ -366,8 +366,8 @@ def _check_channel(channel: str, spec, fail, generic: bool) -> None:
             fail(f"channel {channel!r}: quantity 'current' needs the actuator of a datasheet drive")
         return
     if "joint" not in spec and "link" not in spec:
-        fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link (deflection, strain, "
-             "acceleration)")
+        fail(f"channel {channel!r}: a measured channel needs a joint (position, velocity) or a link "
+             "(deflection, strain, acceleration)")
     if quantity in ("deflection", "deflection_angle", "strain", "acceleration") and "link" not in spec:
         fail(f"channel {channel!r}: quantity {quantity!r} needs a link")
     if quantity in ("position", "velocity") and "joint" not in spec:

@@ -42,7 +42,8 @@ def _position_spreads(rec: Recording, rig: RigDescription, kind: str) -> dict[st
 
 def scale_of(data: Data, param, where: str) -> float:
     """The size a scaled catalogue parameter is measured in (effects.Param.scale), from the data:
-    "effort" the peak actuator force or torque (recorded, else `simulated_effort`), "effort/speed" that over the peak speed,
+    "effort" the peak actuator force or torque (recorded, else `simulated_effort`), "effort/speed" that over the
+    peak speed,
     "command" the peak of command channel `where`, "channel" the spread of channel `where`,
     "motion" the range of the motion channel."""
     if not param.scale:
