@@ -100,14 +100,18 @@ class Linear:
     def settle(self, obs: Mapping[str, float]) -> None:
         """x as the law holds it after long at these readings, at rest (rates 0): x = (I - A)^-1 B u, least squares
         where A has a pole at 1 (an integrator's state, which the readings do not fix, at its least norm)."""
-        u = np.array([0.0 if s.startswith("rate:") or not s else obs[s] for s in self.inputs])
+        u = self._inputs(obs, dict.fromkeys(self.rates, 0.0))
         n = self.A.shape[0]
         self.x = np.linalg.lstsq(np.eye(n) - self.A, self.B @ u, rcond=None)[0] if n else self.x
+
+    def _inputs(self, obs: Mapping[str, float], rates: Mapping[str, float]) -> list[float]:
+        """u: each input's channel value, its rate (from `rates`), or 0 for ""."""
+        return [rates[s] if s in rates else obs[s] if s else 0.0 for s in self.inputs]
 
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         rates = {s: f(obs[s[5:]]) for s, f in self.rates.items()}  # every control period, as the rig filters
         if self.k % self.every == 0:
-            u = [rates[s] if s in rates else obs[s] if s else 0.0 for s in self.inputs]
+            u = self._inputs(obs, rates)
             out = self._step @ np.concatenate((self.x, u))
             p = len(self.commands)
             self.held = [min(lim, max(-lim, y)) for y, lim in zip(out[:p].tolist(), self.limits.tolist())]

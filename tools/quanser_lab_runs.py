@@ -32,9 +32,6 @@ DATA = ROOT / "tests" / "data" / "quanser_2dsfl" / "lab"
 STEPS_DEG = (0, 5, -5, 10, -10, 20, -20, 30, -30, 0)  # run_lab_experiments.m: amps_deg, each held seg_dur
 SEGMENT_S = 4.0  # s, run_lab_experiments.m: seg_dur
 LAW_PERIOD_S = 0.01  # s, orr_controllers.mat: Ts_ctrl
-STAGE_2 = {"type": "state_feedback", "commands": ["current2_cmd"],  # setup_2dsfl.m: K2, rates by the 40 Hz filter
-           "states": ["hub2", "link2", "rate:hub2", "rate:link2"], "gains": [[15.81, -40.33, 0.42, -0.71]],
-           "rate_hz": 40.0, "rate_zeta": 0.9, "rate_method": "euler"}  # as rigs/quanser_2dsfl.toml's [controller]
 CHANNELS = ("hub1_reference", "hub1", "link1")
 
 
@@ -60,7 +57,18 @@ def law(data: Path, controller: str, limit: float | None = None) -> dict:
     stage_1 = {"type": "linear", "commands": ["current1_cmd"], "period_s": LAW_PERIOD_S, "limits": [umax],
                # the Mux's rates (columns 3-4) and the setpoint's zeros (6-8) have zero coefficients: read as ""
                "inputs": ["hub1", "link1", "", "", "hub1_reference", "", "", ""], **matrix}
-    return {"type": "parallel", "parts": [stage_1, STAGE_2]}
+    return {"type": "parallel", "parts": [stage_1, stage_2()]}
+
+
+def stage_2() -> dict:
+    """Quanser's stage-2 law as the rig file has it (setup_2dsfl.m K2, rates by the 40 Hz filter): its [controller]'s
+    current2_cmd row on the states that row weighs, held at 0 (the lab's runs log no stage-2 reference)."""
+    from watflex_sim.rigdesc import load_rig
+
+    law = load_rig("quanser_2dsfl").controller
+    row = law["gains"][law["commands"].index("current2_cmd")]
+    return {**law, "commands": ["current2_cmd"], "states": [s for s, k in zip(law["states"], row) if k],
+            "gains": [[k for k in row if k]], "references": {}}
 
 
 def stair(data: Path, controller: str, limit: float | None = None) -> tuple[np.ndarray, dict]:

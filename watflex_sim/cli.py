@@ -246,14 +246,13 @@ def cmd_plot(args) -> int:
     models = {"nominal": ([], {})} if args.simulate or args.patch else {}
     if args.patch:
         models["patched"] = _read_patch(args.patch)
-    others = {}
-    for label, (effects, parameters) in models.items():
-        from .metrics import nrmse
-        from .resim import resimulate
-        from .rigdesc import load_rig
+    from .metrics import nrmse
+    from .resim import resimulate
+    from .rigdesc import load_rig
 
+    others, kinds = {}, load_rig(rec.rig).channels
+    for label, (effects, parameters) in models.items():
         others[label] = sim = resimulate(rec, effects, parameters)
-        kinds = load_rig(rec.rig).channels
         scores = {c: nrmse(x, sim.channels[c]) for c, x in rec.channels.items()
                   if kinds.get(c, {}).get("kind") in ("measured", "command") and c in sim.channels}
         print(f"{label} model: NRMSE " + ", ".join(f"{c} {v:.4f}" for c, v in scores.items() if math.isfinite(v))

@@ -155,13 +155,13 @@ def mount_accelerometers(spec: mujoco.MjSpec, description) -> None:
               if s.get("quantity") == "acceleration" and s["kind"] == "measured"}
     if not wanted:
         return
+    from .rigs import link_joints
+
     model = spec.copy().compile()  # the reference pose: the links straight
     data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)  # xaxis
+    mujoco.mj_kinematics(model, data)  # xanchor, xaxis
     for channel, s in wanted.items():
-        ids = [j for j in range(model.njnt)
-               if model.joint(j).name == s["link"] or model.joint(j).name.startswith(f"{s['link']}_j")]
+        ids = link_joints(model, s["link"])
         if not ids:
             continue
         anchors = data.xanchor[ids]

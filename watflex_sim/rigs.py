@@ -334,6 +334,12 @@ class WatflexRig(Rig):
         return out
 
 
+def link_joints(model: mujoco.MjModel, link: str) -> list[int]:
+    """The joint ids of a generic rig's `link`: the hinge named so, or the chain LINK_j01, LINK_j02, ... (empty if the
+    model lacks it)."""
+    return [j for j in range(model.njnt) if model.joint(j).name == link or model.joint(j).name.startswith(f"{link}_j")]
+
+
 class GenericRig(Rig):
     """A rig from its description alone (rigdesc): sensors, commands, references and
     disturbances as the channel table says (rigs/emps.toml, rigs/quanser_2dsfl.toml).
@@ -378,9 +384,7 @@ class GenericRig(Rig):
 
     def _link(self, spec) -> list[tuple[int, int, float]]:
         """(qpos, dof, lever arm m) of each hinge of link spec['link'] (empty if not in the model)."""
-        name = spec["link"]
-        ids = [j for j in range(self.model.njnt) if self.model.joint(j).name == name
-               or self.model.joint(j).name.startswith(f"{name}_j")]
+        ids = link_joints(self.model, spec["link"])
         return self._chain(ids, float(spec.get("length", 1.0)), ids[0]) if ids else []
 
     def _sensor(self, channel: str, spec):
