@@ -208,7 +208,7 @@ def test_a_model_diagnosed_on_quansers_runs_predicts_the_labs_lqg_runs(tmp_path)
     assert score["diagnosed"]["hub1"] < 0.5 * score["nominal"]["hub1"]
 
 
-def test_a_run_cut_from_a_longer_one_starts_its_linear_law_as_it_held_there(tmp_path):
+def test_a_run_cut_from_a_longer_one_starts_its_linear_law_as_it_held_there():
     """Each of the lab's files is a cut of one long run, the arm at rest at the last step, the LQG's Kalman estimate
     long settled there. Started at rest away from the nominal pose, a `linear` law takes the state it holds at those
     readings (x = A x + B u, to 1e-12), not its reset's zero, whose estimate of 0 deg at -20 deg kicked the hub:
@@ -217,10 +217,8 @@ def test_a_run_cut_from_a_longer_one_starts_its_linear_law_as_it_held_there(tmp_
     from watflex_sim.recording import read_recording
     from watflex_sim.resim import resimulate
 
-    samples, sidecar = lab_runs.stair(LAB, "lqg")
-    part = samples[5 * 2000: 6 * 2000].copy()  # the 20 deg step, from rest at -20 deg (STEPS_DEG)
-    part[:, 0] -= part[0, 0]
-    rec = read_recording(lab_runs.write(part, sidecar, tmp_path / "lqg_20deg"))
+    # the 20 deg step, from rest at -20 deg (STEPS_DEG), read as the lab logged it (rigs/quanser_2dsfl_lab_lqg.toml)
+    rec = read_recording(LAB / "lqg_step_20deg_run01.mat", sidecar=load_rig("quanser_2dsfl_lab_lqg").sidecar)
     folded = _saved("lqg_ss")
     law = Linear(["current1_cmd"], INPUTS, A=folded["A"], B=folded["B"], C=folded["C"], D=folded["D"], period_s=0.01,
                  period=0.002)

@@ -181,10 +181,12 @@ def test_reads_mat_files_with_row_and_column_vectors(tmp_path):
     time = np.arange(5) * 1e-3
     hub = np.array([0.0, 0.1, np.nan, 0.3, 0.4])
     scipy.io.savemat(tmp_path / "m.mat", {"time": time.reshape(-1, 1), "hub_angle": hub,
-                                          "motor_current": np.arange(5, dtype=np.int16)})
+                                          "motor_current": np.arange(5, dtype=np.int16),
+                                          "controller": "lqr", "notes": ["run 1", "hot"]})  # text: passed over
     put(tmp_path, None, META, name="m")
     rec = read_recording(tmp_path / "m.mat")
     assert_valid(rec)
+    assert set(rec.channels) == {"hub_angle", "motor_current"}
     np.testing.assert_array_equal(rec.time, time)
     np.testing.assert_array_equal(rec.channels["hub_angle"], hub)
     np.testing.assert_array_equal(rec.channels["motor_current"], [0, 1, 2, 3, 4])

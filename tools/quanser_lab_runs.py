@@ -8,20 +8,23 @@ the Simulink Mux of [hub, deflection, their rates] and the setpoint [reference, 
 left under Quanser's state feedback at 2 ms. A stair of steps (run_lab_experiments.m: 0, 5, -5, 10, -10, 20, -20, 30,
 -30, 0 deg, 4 s each) was logged at 500 Hz and cut into one file a step; only stage 1 was logged.
 
-This joins each controller's ten files into one recording of the contract (recordings.md: NAME.csv and its sidecar,
-the controller a `parallel` of a `linear` law and the rig's stage-2 `state_feedback`), re-simulates it on the rig's
-nominal model and prints, per channel, the NRMSE and, per step, where hub 1 ends; a figure beside. The recordings
-can then be diagnosed like any other: watflex-sim diagnose OUT/lqg_stair.csv --report OUT/lqg.
+Each file can be read as it is, with its controller, by the rig files rigs/quanser_2dsfl_lab_lqg.toml and
+rigs/quanser_2dsfl_lab_hinf.toml (the base rig extended by the lab's .mat layout and controller: `watflex-sim diagnose
+LAB/lqg_step_10deg_run01.mat --rig quanser_2dsfl_lab_lqg`). This tool joins each controller's ten files, so read,
+into one recording of the contract (recordings.md: NAME.csv and its sidecar, the controller that rig file's `parallel`
+of a `linear` law and Quanser's stage-2 `state_feedback`), re-simulates it on the rig's nominal model and prints, per
+channel, the NRMSE and, per step, where hub 1 ends; a figure beside. The recordings can then be diagnosed like any
+other: watflex-sim diagnose OUT/lqg_stair.csv --report OUT/lqg.
 """
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
-import scipy.io
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -31,7 +34,6 @@ from watflex_sim.metrics import nrmse  # noqa: E402
 DATA = ROOT / "tests" / "data" / "quanser_2dsfl" / "lab"
 STEPS_DEG = (0, 5, -5, 10, -10, 20, -20, 30, -30, 0)  # run_lab_experiments.m: amps_deg, each held seg_dur
 SEGMENT_S = 4.0  # s, run_lab_experiments.m: seg_dur
-LAW_PERIOD_S = 0.01  # s, orr_controllers.mat: Ts_ctrl
 CHANNELS = ("hub1_reference", "hub1", "link1")
 
 
@@ -48,39 +50,31 @@ def segment_files(data: Path, controller: str) -> list[Path]:
     return files
 
 
-def law(data: Path, controller: str, limit: float | None = None) -> dict:
-    """The sidecar's controller: the lab's state space on stage 1 (clipped at its design's umax, A, unless `limit`)
-    beside Quanser's stage-2 state feedback."""
-    saved = scipy.io.loadmat(data / "orr_controllers.mat", squeeze_me=True)[f"{controller}_ss"]
-    matrix = {name: np.atleast_2d(np.asarray(saved[name].item(), dtype=float)).tolist() for name in "ABCD"}
-    umax = float(saved["umax"].item()) if limit is None else limit
-    stage_1 = {"type": "linear", "commands": ["current1_cmd"], "period_s": LAW_PERIOD_S, "limits": [umax],
-               # the Mux's rates (columns 3-4) and the setpoint's zeros (6-8) have zero coefficients: read as ""
-               "inputs": ["hub1", "link1", "", "", "hub1_reference", "", "", ""], **matrix}
-    return {"type": "parallel", "parts": [stage_1, stage_2()]}
-
-
-def stage_2() -> dict:
-    """Quanser's stage-2 law as the rig file has it (setup_2dsfl.m K2, rates by the 40 Hz filter): its [controller]'s
-    current2_cmd row on the states that row weighs, held at 0 (the lab's runs log no stage-2 reference)."""
+def law(controller: str, limit: float | None = None) -> dict:
+    """The controller of the lab's rig file (rigs/quanser_2dsfl_lab_CONTROLLER.toml): the lab's state space on stage 1
+    (its matrices those of orr_controllers.mat, clipped at its design's umax, A, unless `limit`) beside Quanser's
+    stage-2 state feedback."""
     from watflex_sim.rigdesc import load_rig
 
-    law = load_rig("quanser_2dsfl").controller
-    row = law["gains"][law["commands"].index("current2_cmd")]
-    return {**law, "commands": ["current2_cmd"], "states": [s for s, k in zip(law["states"], row) if k],
-            "gains": [[k for k in row if k]], "references": {}}
+    table = copy.deepcopy(load_rig(f"quanser_2dsfl_lab_{controller}").controller)
+    if limit is not None:
+        table["parts"][0]["limits"] = [limit]
+    return table
 
 
 def stair(data: Path, controller: str, limit: float | None = None) -> tuple[np.ndarray, dict]:
-    """(samples: columns time s, hub1_reference, hub1, link1 rad), sidecar) of one controller's stair run."""
+    """(samples: columns time s, hub1_reference, hub1, link1 rad), sidecar) of one controller's stair run: its files
+    read as the lab logged them (the lab rig's .mat layout), one after the other."""
+    from watflex_sim.recording import read_recording
+    from watflex_sim.rigdesc import load_rig
+
+    layout = load_rig(f"quanser_2dsfl_lab_{controller}").sidecar
     parts = []
     for i, path in enumerate(segment_files(data, controller)):
-        seg = scipy.io.loadmat(path, squeeze_me=True)
-        measured, reference = np.asarray(seg["X1_meas"], float), np.asarray(seg["X1_ref"], float)
-        parts.append(np.column_stack([np.asarray(seg["time"], float) + i * SEGMENT_S, reference[:, 0],
-                                      measured[:, 0], measured[:, 1]]))
+        seg = read_recording(path, sidecar=layout)
+        parts.append(np.column_stack([seg.time + i * SEGMENT_S, *(seg.channels[c] for c in CHANNELS)]))
     sidecar = {"format": "flexarm-recording/1", "rig": "quanser_2dsfl", "experiment": f"lab_{controller}_stair",
-               "mode": "closed_loop", "controller": law(data, controller, limit),
+               "mode": "closed_loop", "controller": law(controller, limit),
                "notes": f"stage 1 under the lab's {controller} (orr_controllers.mat), stage 2 under Quanser's K2; "
                         "stage 2 not logged; joined by tools/quanser_lab_runs.py"}
     return np.vstack(parts), sidecar

@@ -389,6 +389,7 @@ def _read_csv_lines(path: Path, rig: str, source):
 
 # MAT v5 data types -> bytes per element, for real numeric data (miINT8 .. miUINT64).
 _MAT_NUMERIC = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
+_MAT_TEXT = {2: 1, 4: 2, 16: 1, 17: 2}  # a char array's data types (bytes a character: exactly, or at least in UTF)
 
 
 def _mat_elements(buf: bytes, order: str, source) -> list[tuple[int, bytes]]:
@@ -411,7 +412,7 @@ def _mat_elements(buf: bytes, order: str, source) -> list[tuple[int, bytes]]:
 
 
 def _check_mat(raw: bytes, source) -> None:
-    """Accept only MAT v5/v7 files of plain real numeric arrays: scipy.io.loadmat can crash
+    """Accept only MAT v5/v7 files of plain real numeric arrays and text: scipy.io.loadmat can crash
     the interpreter (segfault) on malformed ones, so their structure is checked first."""
     order = {b"IM": "<", b"MI": ">"}.get(raw[126:128])
     if len(raw) < 128 or not order or struct.unpack_from(order + "H", raw, 124)[0] != 0x0100:
@@ -431,10 +432,14 @@ def _check_mat(raw: bytes, source) -> None:
         dims = struct.unpack(order + f"{len(parts[1][1]) // 4}i", parts[1][1])
         name = parts[2][1].decode("latin-1")
         kind, data = parts[3] if len(parts) == 4 else (0, b"")
+        if flags & 0xFF == 4 and kind in _MAT_TEXT and min(dims) >= 0 and not flags & 0x800:
+            size = math.prod(dims) * _MAT_TEXT[kind]
+            if len(data) >= size if kind in (16, 17) else len(data) == size:
+                continue  # text (a note, a controller's name): read, never a channel
         if not 6 <= flags & 0xFF <= 15 or flags & 0x800 or kind not in _MAT_NUMERIC \
                 or min(dims) < 0 or len(data) != math.prod(dims) * _MAT_NUMERIC[kind]:
             raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real "
-                                         "numeric array")
+                                         "numeric array or text")
 
 
 def _read_mat(raw: bytes, rig: str, source):
@@ -457,7 +462,11 @@ def _read_mat(raw: bytes, rig: str, source):
     time_name = description.time_variable
     scalars = {n: float(np.asarray(mat[n]).ravel()[0]) for n in description.mat_scalars
                if n in mat and np.asarray(mat[n]).size == 1}
-    names = [k for k in mat if not k.startswith("__") and k not in scalars]
+    text = {k for k in mat if not k.startswith("__") and np.asarray(mat[k]).dtype.kind == "U"}  # notes, names
+    if text & {time_name, *description.channels}:
+        name = min(text & {time_name, *description.channels})
+        raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real numeric array (text)")
+    names = [k for k in mat if not k.startswith("__") and k not in scalars and k not in text]
     if time_name not in names:
         raise RecordingError(source, f"no {time_name!r} variable")
     _check_names([n for n in names if n != time_name], rig, source)
@@ -553,6 +562,8 @@ def _read_mat_split(path: Path, rig: str):
         if variable not in mat:
             raise RecordingError(source, f"no variable {variable!r} (for {channel!r})")
         array = np.asarray(mat[variable])
+        if array.dtype.kind == "U":
+            raise RecordingError(source, f"variable {variable!r} (for {channel!r}) is text, not numbers")
         column = int(spec.get("column", 1))
         if array.ndim != 2 or not 1 <= column <= array.shape[1]:
             raise RecordingError(source, f"variable {variable!r} (shape {array.shape}) has no column {column} (for {channel!r})")

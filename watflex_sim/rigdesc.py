@@ -41,9 +41,11 @@ UNITS = ("rad", "m", "rad/s", "m/s", "rad/s^2", "m/s^2", "V", "A", "N", "N m", "
 # Controller-table keys whose (string or list-of-string) values name channels of the rig.
 CHANNEL_ROLES = ("position", "reference", "command", "commands", "velocity", "deflection", "measured", "output",
                  "channel", "channels", "states", "inputs", "outputs")
+# A rig file's keys; datasheet: the model's numbers, built by datasheet.py when model = "datasheet"; extends: a base
+# rig whose keys this file takes unless it sets them (_raw)
 KEYS = ("name", "model", "sensors", "channels", "controller", "parameters", "effects", "time_variable",
         "mat_scalars", "sidecar", "description", "mat_channels", "mat_time", "control_period_s",
-        "control_jitter_s", "datasheet", "columns")  # datasheet: the model's numbers, built by datasheet.py when model = "datasheet"
+        "control_jitter_s", "datasheet", "columns", "extends")
 # What a generic measured channel reads (rigs.GenericRig): a joint's position (rad or m) or
 # velocity, a link's tip deflection (m) or its angle (rad), the strain at x on a link, the current (A) of a
 # datasheet drive (`actuator`), or an accelerometer's reading across a link at x (m/s^2; model.mount_accelerometers).
@@ -53,6 +55,7 @@ CHANNEL_KEYS = {"unit", "kind", "joint", "link", "quantity", "scale", "offset", 
                 "filter_zeta", "length", "x", "thickness", "actuator", "gain", "limit", "bits", "range",
                 "current_per_unit"}  # A per command unit: a command limit also reported as a current
 MAT_KEYS = {"file", "variable", "column", "scale"}
+MERGED = ("channels", "parameters", "effects")  # tables a rig that `extends` another merges entry by entry
 DATASHEET = "datasheet"  # model = "datasheet": the model is generated from the rig file's [datasheet]
 
 
@@ -383,11 +386,43 @@ def _load(path: str, mtime_ns: int) -> RigDescription:
     """A rig file, checked (cached per file version)."""
     p = Path(path)
     default = p.parent.name if p.name == "rig.toml" else p.stem
+    return _check(_raw(p), path, default)
+
+
+def _raw(path: Path, seen: tuple = ()) -> dict:
+    """A rig file's table with what it `extends` filled in: a base rig (a name, or a path relative to this file)
+    whose keys it takes unless it sets them; [channels], [parameters] and [effects] are merged entry by entry, any
+    other key it sets (a file layout, [controller], [sidecar], [datasheet]) replaces the base's whole. The base's
+    model file stays its own (made absolute); `name` is never inherited."""
     try:
-        raw = read_toml(p, "rig description")
+        raw = read_toml(path, "rig description")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such rig file") from None
-    return _check(raw, path, default)
+    if "extends" not in raw:
+        return raw
+    base_name = raw.pop("extends")
+    if not isinstance(base_name, str) or not base_name:
+        raise ConfigError(f"{path}: extends must name a rig or a rig file, got {base_name!r}")
+    if _is_path(base_name):
+        base_path = (path.parent / Path(base_name).expanduser()).resolve()
+        base_path = base_path / "rig.toml" if base_path.is_dir() else base_path
+    else:
+        try:
+            base_path = rig_file(base_name).resolve()
+        except ConfigError as err:
+            raise ConfigError(f"{path}: extends: {err}") from None
+    if base_path in seen or base_path == path.resolve():
+        raise ConfigError(f"{path}: extends {base_name!r}, which extends it again (a cycle)")
+    base = _raw(base_path, (*seen, path.resolve()))
+    base.pop("name", None)
+    model = base.get("model")
+    if isinstance(model, str) and (model.endswith(".xml") or "/" in model or os.sep in model):
+        base["model"] = str((base_path.parent / model).resolve())
+    merged = {**base, **raw}
+    for key in MERGED:
+        if isinstance(base.get(key), dict) and isinstance(raw.get(key), dict):
+            merged[key] = {**base[key], **raw[key]}
+    return merged
 
 
 @cache
@@ -400,7 +435,7 @@ def _name_of(path: str, mtime_ns: int) -> str:
         raw = tomllib.loads(p.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return default
-    if "model" not in raw and "sensors" not in raw:
+    if "model" not in raw and "sensors" not in raw and "extends" not in raw:
         return ""
     return raw["name"] if isinstance(raw.get("name"), str) else default
 
