@@ -119,6 +119,58 @@ class Linear:
         self.k += 1
         return dict(zip(self.commands, self.held))
 
+    @classmethod
+    def columns(cls, members: list["Linear"], times: np.ndarray) -> "LinearColumns | None":
+        """The members' law on arrays (lockstep's columns), or None unless they share its matrices, inputs, commands
+        and period and have not run yet."""
+        first = members[0]
+        if type(first).__call__ is not Linear.__call__ or any(
+                type(m) is not type(first) or m.inputs != first.inputs or m.commands != first.commands
+                or m.every != first.every or not np.array_equal(m._step, first._step) or m.k for m in members):
+            return None
+        rates = {s: RateFilter.columns([m.rates[s] for m in members]) for s in first.rates}
+        return None if any(r is None for r in rates.values()) else LinearColumns(members, rates)
+
+
+class LinearColumns:
+    """Linear of B members at once, their values on arrays of shape (B,): each member's product the single law's
+    (one matrix-vector product a member, so the same sums in the same order, bit for bit)."""
+
+    def __init__(self, members: list[Linear], rates: dict[str, RateFilter]):
+        first = members[0]
+        self.commands, self.inputs, self.every, self.rates = first.commands, first.inputs, first.every, rates
+        self.A, self.B, self._step = first.A, first.B, first._step
+        self.limits = np.array([m.limits for m in members])  # (B, commands)
+        self.x = np.array([m.x for m in members])  # (B, n)
+        self.k = 0
+        self.held = np.zeros((len(members), len(first.commands)))
+
+    def _inputs(self, obs: Mapping[str, np.ndarray], rates: Mapping[str, np.ndarray]) -> np.ndarray:
+        """u of every member, (B, inputs): Linear._inputs column by column."""
+        u = np.zeros((len(self.x), len(self.inputs)))
+        for j, s in enumerate(self.inputs):
+            if s:
+                u[:, j] = rates[s] if s in rates else obs[s]
+        return u
+
+    def settle(self, obs: Mapping[str, np.ndarray], which: np.ndarray) -> None:
+        """Linear.settle for the members `which` (a mask) holds."""
+        n = self.A.shape[0]
+        u = self._inputs(obs, dict.fromkeys(self.rates, np.zeros(len(self.x))))
+        for i in np.flatnonzero(which) if n else ():
+            self.x[i] = np.linalg.lstsq(np.eye(n) - self.A, self.B @ u[i], rcond=None)[0]
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        rates = {s: f(obs[s[5:]]) for s, f in self.rates.items()}
+        if self.k % self.every == 0:
+            state = np.concatenate((self.x, self._inputs(obs, rates)), axis=1)
+            out = np.array([self._step @ row for row in state])
+            p = len(self.commands)
+            self.held = np.minimum(self.limits, np.maximum(-self.limits, out[:, :p]))
+            self.x = out[:, p:]
+        self.k += 1
+        return {c: self.held[:, j] for j, c in enumerate(self.commands)}
+
 
 def _shaped(A, B, C, D, m: int, p: int) -> tuple[np.ndarray, ...]:
     """A, B, C, D as arrays (n x n, n x m, p x n, p x m) from nested or flat lists; ValueError naming what is off."""

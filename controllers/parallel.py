@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Mapping, Sequence
 
+import numpy as np
+
 
 class Parallel:
     """Every part called each control period on the same measured channels; their commands merged."""
@@ -50,5 +52,39 @@ class Parallel:
     def __call__(self, t: float, obs: Mapping[str, float]) -> dict[str, float]:
         out: dict[str, float] = {}
         for part in self.parts:  # no two drive one command: engine.make_controller checks that once, when it builds
+            out.update(part(t, obs))
+        return out
+
+    @classmethod
+    def columns(cls, members: list["Parallel"], times: np.ndarray) -> "ParallelColumns | None":
+        """Each part's column form over the members (lockstep's columns), or None where a part has none."""
+        first = members[0]
+        if any(type(m) is not type(first) or len(m.parts) != len(first.parts) for m in members):
+            return None
+        parts = []
+        for j, part in enumerate(first.parts):
+            group = [m.parts[j] for m in members]
+            form = getattr(type(part), "columns", None)
+            law = form(group, times) if form is not None and all(type(p) is type(part) for p in group) else None
+            if law is None:
+                return None
+            parts.append(law)
+        return ParallelColumns(parts)
+
+
+class ParallelColumns:
+    """Parallel of B members at once: each part's column form, their commands merged."""
+
+    def __init__(self, parts: list):
+        self.parts = parts
+
+    def settle(self, obs: Mapping[str, np.ndarray], which: np.ndarray) -> None:
+        for part in self.parts:
+            if hasattr(part, "settle"):
+                part.settle(obs, which)
+
+    def __call__(self, t: float, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for part in self.parts:
             out.update(part(t, obs))
         return out

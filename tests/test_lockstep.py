@@ -8,6 +8,8 @@ in qfrc_applied). Before they did (math.exp, a float's ** 2.0, the callback's to
 a laser arm with Stribeck friction differed by 4e-15 V after 3 s, and inside a diagnosis stick-slip
 made such an ulp another finding. So every channel must be equal: TOL is 0.
 """
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -228,12 +230,16 @@ def test_sensor_and_actuator_gains_offsets_and_limits_run_on_arrays_and_match_si
     ("quanser_2dsfl", "quanser_2dsfl/data_fsf_th11.mat", "link2_stiffness", [0.92, 0.96, 1.0, 1.02, 1.05, 1.08]),
     ("emps", "emps/DATA_EMPS.mat", "mass", [0.8, 0.9, 1.0, 1.1, 1.2, 1.25]),
     ("emps", "emps/DATA_EMPS.mat", "drive_gain", [0.98, 0.99, 1.0, 1.01, 1.015, 1.02]),  # an actuator gain (Patches)
+    ("quanser_2dsfl_lab_lqg", "quanser_2dsfl/lab/lqg_step_20deg_run01.mat", "drive1_damping",
+     [0.8, 0.9, 1.0, 1.1, 1.2, 1.25]),  # a lab's LQG (linear at 10 ms) beside state feedback (parallel), settled
 ])
 def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(built, rig, path, name, ratios, noise_seed):
     """columns.GenericColumns: a rig described as data (rigs/quanser_2dsfl.toml: link strains as hinge sums,
     state feedback through an Euler rate filter, current commands; rigs/emps.toml: cascade P with the 2-tap
-    difference, a converter step) re-simulated in lockstep on arrays equals each re-simulated alone (2 s), with the
-    rig's measurement noise off and on (the draws taken ahead in the single run's order)."""
+    difference, a converter step; rigs/quanser_2dsfl_lab_lqg.toml: a lab's state space at 10 ms beside state
+    feedback at 2 ms, from rest at -20 deg, where the law starts as it holds there) re-simulated in lockstep on arrays
+    equals each re-simulated alone (2 s), with the rig's measurement noise off and on (the draws taken ahead in the
+    single run's order)."""
     from pathlib import Path
 
     from watflex_sim.recording import read_recording
@@ -247,6 +253,18 @@ def test_rigs_described_as_data_run_on_arrays_and_match_single_runs(built, rig, 
     for r, sim in zip(ratios, together):
         alone = resimulate(rec, [], {name: r}, until=2.0, noise_seed=noise_seed, rig=description)
         assert all(np.array_equal(sim.channels[c], alone.channels[c], equal_nan=True) for c in alone.channels), r
+
+
+def test_members_started_at_rest_and_away_from_it_share_a_linear_law_on_arrays(built):
+    """A batch may hold runs that start at the nominal pose (a linear law from zero) beside runs that start at rest
+    elsewhere (`initial`: the law settled there, `Linear.settle`), as a diagnosis of a lab's cut files does: one column
+    form for all (controllers/linear.py LinearColumns, parallel.py ParallelColumns: the lab's LQG at 10 ms beside
+    state feedback at 2 ms), each member equal to its run alone, bit for bit, and the settled ones unlike the rest."""
+    base = load_scenario("quanser_lab_lqg_step", ["duration_s=1.0"])
+    away = [{**base, "initial": {"hub1": a, "link1": 0.0}} for a in (-0.2, 0.3)]
+    results = _compare([base, {**base, "seed": 2}, *away])
+    assert len(built) == 1 and built[0] is not None and list(built[0].settling) == [False, False, True, True]
+    assert abs(results[2].recording.channels["hub1"][0] + 0.2) < 1e-3
 
 
 def test_the_observer_and_its_friction_compensation_run_on_arrays_and_match_single_runs(built):

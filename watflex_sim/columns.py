@@ -334,10 +334,13 @@ class ColumnControl:
         self.table = np.full((n, len(self.names), len(loops)), math.nan)  # (tick, channel, member)
         self.growth = GrowthColumns([loop.monitor for loop in loops], arrays["qvel"])
         self.patches = Patches(loops, arrays["ctrl"])
+        self.settling = np.array([loop._settle for loop in loops])  # members started at rest away from nominal
 
     def tick(self, k: int) -> None:
         """Sensors, controller, converters of control period k for every member; the recording's row k."""
         obs = self.patches.sense(self.rig.observe(k, {c: table[k] for c, table in self.refs.items()}))
+        if k == 0 and self.settling.any():
+            self.law.settle(obs, self.settling)  # as ControlLoop.control does: the law as it holds at rest there
         command = self.law(k * self.period, obs)
         recorded = self.rig.actuate(command)
         self.patches.act()
