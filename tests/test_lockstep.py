@@ -8,8 +8,6 @@ in qfrc_applied). Before they did (math.exp, a float's ** 2.0, the callback's to
 a laser arm with Stribeck friction differed by 4e-15 V after 3 s, and inside a diagnosis stick-slip
 made such an ulp another finding. So every channel must be equal: TOL is 0.
 """
-from pathlib import Path
-
 import numpy as np
 import pytest
 

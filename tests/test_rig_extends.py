@@ -38,11 +38,13 @@ def test_a_rig_file_extends_another_naming_only_what_differs(tmp_path, monkeypat
     assert child.name == "variant" and base.name == "myrig"
     assert child.model_path == base.model_path == (tmp_path / "myrig" / "myrig.xml").resolve()
     assert child.channels["qm"]["noise"] == 5e-6 and base.channels["qm"]["noise"] == 2e-6
-    assert {c: s for c, s in child.channels.items() if c != "qm"} == {c: s for c, s in base.channels.items() if c != "qm"}
+    others = {c: s for c, s in base.channels.items() if c != "qm"}
+    assert {c: s for c, s in child.channels.items() if c != "qm"} == others
     assert set(child.parameters) == set(base.parameters) | {"carriage_damping"}
     assert child.controller == base.controller and child.sidecar == base.sidecar and child.effects == base.effects
     assert child.description == "the same rig, its carriage noisier" != base.description
-    (tmp_path / "variant" / "rig.toml").write_text(CHILD + '[sidecar]\nformat = "flexarm-recording/1"\nrig = "variant"\n')
+    sidecar = '[sidecar]\nformat = "flexarm-recording/1"\nrig = "variant"\n'
+    (tmp_path / "variant" / "rig.toml").write_text(CHILD + sidecar)
     assert load_rig(str(tmp_path / "variant")).sidecar == {"format": "flexarm-recording/1", "rig": "variant"}
 
 
@@ -71,11 +73,14 @@ def test_the_labs_files_are_read_as_the_lab_logged_them():
         rec = read_recording(LAB / f"{controller}_step_10deg_run01.mat", sidecar=rig.sidecar)
         assert isinstance(run["controller"], str) and rec.rig == f"quanser_2dsfl_lab_{controller}"
         assert np.array_equal(rec.time, run["time"]) and math.isclose(rec.time[1], 0.002)
-        assert np.array_equal(rec.channels["hub1"], run["theta11"]) and np.array_equal(rec.channels["link1"], run["theta12"])
+        assert np.array_equal(rec.channels["hub1"], run["theta11"])
+        assert np.array_equal(rec.channels["link1"], run["theta12"])
         assert np.array_equal(rec.channels["hub1_reference"], run["X1_ref"][:, 0])
         stage_1 = rig.controller["parts"][0]
         for name in "ABCD":
             assert np.array_equal(np.atleast_2d(stage_1[name]), np.atleast_2d(saved[f"{controller}_ss"][name].item()))
-        assert stage_1["limits"] == [saved[f"{controller}_ss"]["umax"].item()] and stage_1["period_s"] == saved["Ts_ctrl"]
+        assert stage_1["limits"] == [saved[f"{controller}_ss"]["umax"].item()]
+        assert stage_1["period_s"] == saved["Ts_ctrl"]
         assert rig.mat_channels == load_rig("quanser_2dsfl_lab_lqg").mat_channels
-        assert rig.channels == load_rig("quanser_2dsfl").channels and rig.datasheet == load_rig("quanser_2dsfl").datasheet
+        base = load_rig("quanser_2dsfl")
+        assert rig.channels == base.channels and rig.datasheet == base.datasheet
