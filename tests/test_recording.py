@@ -193,6 +193,50 @@ def test_reads_mat_files_with_row_and_column_vectors(tmp_path):
     assert rec.meta == META
 
 
+def save_v73(path, variables: dict) -> None:
+    """A MATLAB v7.3 file as MATLAB writes one (`save -v7.3`): a 512-byte user block holding the MAT header, then
+    HDF5 with each array transposed (MATLAB's column-major order) and its MATLAB_class; text as 16-bit codes; a
+    struct as a group. Written with h5py, as hdf5storage does (no MATLAB here)."""
+    import h5py
+
+    with h5py.File(path, "w", userblock_size=512) as f:
+        for name, value in variables.items():
+            if isinstance(value, dict):
+                group = f.create_group(name)
+                group.attrs["MATLAB_class"] = np.bytes_("struct")
+                for field, v in value.items():
+                    group.create_dataset(field, data=np.atleast_2d(v).T).attrs["MATLAB_class"] = np.bytes_("double")
+                continue
+            text = isinstance(value, str)
+            array = np.array([[ord(c) for c in value]], dtype=np.uint16) if text else np.atleast_2d(value)
+            cls = "char" if text else {"f": "double", "c": "double"}.get(array.dtype.kind, str(array.dtype))
+            f.create_dataset(name, data=array.T).attrs["MATLAB_class"] = np.bytes_(cls)
+    with open(path, "r+b") as fh:
+        fh.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".ljust(116) + bytes(8) + b"\x00\x02IM")
+
+
+def test_reads_mat_v73_files_as_their_v5_twins(tmp_path):
+    """A v7.3 file (HDF5) gives what the same variables saved as v5 give: column and row vectors, an int16 channel, a
+    scalar for the sidecar ("mat:NAME"), text and a struct passed over; a complex channel refused by name."""
+    time = np.arange(5) * 1e-3
+    variables = {"time": time.reshape(-1, 1), "hub_angle": np.array([0.0, 0.1, np.nan, 0.3, 0.4]),
+                 "motor_current": np.arange(5, dtype=np.int16), "controller": "pd_tip", "setup": {"kp": 0.127}}
+    scipy.io.savemat(tmp_path / "v5.mat", variables)
+    save_v73(tmp_path / "v73.mat", variables)
+    assert (tmp_path / "v73.mat").read_bytes()[512:516] == b"\x89HDF"
+    put(tmp_path, None, META, name="v5")
+    put(tmp_path, None, META, name="v73")
+    v5, v73 = read_recording(tmp_path / "v5.mat"), read_recording(tmp_path / "v73.mat")
+    assert_valid(v73)
+    np.testing.assert_array_equal(v73.time, v5.time)
+    assert set(v73.channels) == set(v5.channels) == {"hub_angle", "motor_current"}
+    for channel in v5.channels:
+        np.testing.assert_array_equal(v73.channels[channel], v5.channels[channel])
+    save_v73(tmp_path / "v73.mat", {**variables, "hub_angle": variables["hub_angle"] * 1j})
+    with pytest.raises(RecordingError, match=r"v73\.mat: MATLAB variable 'hub_angle' is not a plain real numeric"):
+        read_recording(tmp_path / "v73.mat")
+
+
 @pytest.mark.parametrize("variables, match", [
     ({"hub_angle": np.ones(3)}, r"no 'time' variable"),
     ({"time": np.arange(3.0), "hub_angle": np.ones(3), "tout": np.ones(3)},
@@ -214,9 +258,11 @@ def test_mat_errors(tmp_path, variables, match):
 
 
 @pytest.mark.parametrize("raw, match", [
-    (b"MATLAB 5.0 garbage" * 20, r"not a MATLAB v5/v7 file"),
+    (b"MATLAB 5.0 garbage" * 20, r"not a MATLAB v5, v7 or v7.3 file"),
     (b"MATLAB 7.3 MAT-file".ljust(124) + b"\x00\x02IM" + b"\x89HDF\r\n" * 10,
-     r"not a MATLAB v5/v7 file \(v4 and v7.3 are not supported\)"),
+     r"not a MATLAB v5, v7 or v7.3 file \(v4 is not supported\)"),
+    (b"MATLAB 7.3 MAT-file".ljust(124) + b"\x00\x02IM" + bytes(384) + b"\x89HDF\r\n\x1a\n" + b"garbage" * 20,
+     r"cannot read MATLAB v7.3 file: "),
     (b"MATLAB 5.0 MAT-file".ljust(124) + b"\x00\x01IM" + b"\x0e\x00\x00\x00\xff\x00\x00\x00",
      r"truncated MATLAB file"),
 ])

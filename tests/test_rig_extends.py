@@ -12,6 +12,7 @@ from watflex_sim.model import ConfigError
 from watflex_sim.recording import read_recording
 from watflex_sim.rigdesc import load_rig
 
+from test_recording import save_v73
 from test_rig_folder import make_rig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,3 +85,18 @@ def test_the_labs_files_are_read_as_the_lab_logged_them():
         assert rig.mat_channels == load_rig("quanser_2dsfl_lab_lqg").mat_channels
         base = load_rig("quanser_2dsfl")
         assert rig.channels == base.channels and rig.datasheet == base.datasheet
+
+
+def test_a_labs_file_saved_as_v73_reads_as_the_v5_file_does(tmp_path):
+    """The same lab run saved by MATLAB's `save -v7.3` (HDF5; tests/test_recording.py save_v73 writes it as MATLAB
+    does) reads through the lab's rig file to the same samples, its matrix columns picked from arrays HDF5 keeps
+    transposed."""
+    rig = load_rig("quanser_2dsfl_lab_lqg")
+    saved = scipy.io.loadmat(LAB / "lqg_step_10deg_run01.mat")
+    save_v73(tmp_path / "lqg_step_10deg_run01.mat", {k: str(v[0]) if v.dtype.kind == "U" else v
+                                                      for k, v in saved.items() if not k.startswith("__")})
+    v5 = read_recording(LAB / "lqg_step_10deg_run01.mat", sidecar=rig.sidecar)
+    v73 = read_recording(tmp_path / "lqg_step_10deg_run01.mat", sidecar=rig.sidecar)
+    assert np.array_equal(v73.time, v5.time) and set(v73.channels) == set(v5.channels) == {"hub1_reference", "hub1",
+                                                                                             "link1"}
+    assert all(np.array_equal(v73.channels[c], v5.channels[c]) for c in v5.channels)

@@ -390,6 +390,7 @@ def _read_csv_lines(path: Path, rig: str, source):
 # MAT v5 data types -> bytes per element, for real numeric data (miINT8 .. miUINT64).
 _MAT_NUMERIC = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
 _MAT_TEXT = {2: 1, 4: 2, 16: 1, 17: 2}  # a char array's data types (bytes a character: exactly, or at least in UTF)
+_V73_NUMERIC = ("double", "single", "logical", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
 
 
 def _mat_elements(buf: bytes, order: str, source) -> list[tuple[int, bytes]]:
@@ -411,12 +412,63 @@ def _mat_elements(buf: bytes, order: str, source) -> list[tuple[int, bytes]]:
     return out
 
 
-def _check_mat(raw: bytes, source) -> None:
-    """Accept only MAT v5/v7 files of plain real numeric arrays and text: scipy.io.loadmat can crash
-    the interpreter (segfault) on malformed ones, so their structure is checked first."""
+def _load_mat(raw: bytes, source) -> dict:
+    """A MATLAB file's variables as scipy.io.loadmat gives them (arrays in MATLAB's shape, text as str; None for a
+    struct, cell, object or sparse array, left unread): a v5/v7 file checked first (_check_mat), a v7.3 file (HDF5,
+    `save -v7.3`, MATLAB's choice past 2 GB) read by h5py."""
+    if raw[124:128] in (b"\x00\x02IM", b"\x02\x00MI") and raw[512:520] == b"\x89HDF\r\n\x1a\n":
+        return _load_v73(raw, source)
+    readable, other = _check_mat(raw, source)
+    import scipy.io
+
+    try:
+        return dict.fromkeys(other) | (scipy.io.loadmat(io.BytesIO(raw), variable_names=readable) if readable else {})
+    except Exception as err:  # scipy raises a zoo of types on corrupt files
+        cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
+
+
+def _load_v73(raw: bytes, source) -> dict:
+    """A v7.3 file's top-level variables: numeric arrays transposed back to MATLAB's shape (HDF5 keeps MATLAB's
+    column-major order), char arrays as str, structs and cells None (left unread), MATLAB's own groups (#refs#) left
+    out; a complex array refused by name."""
+    import h5py
+
+    out = {}
+    try:
+        with h5py.File(io.BytesIO(raw), "r") as f:
+            for name, item in f.items():
+                kind = item.attrs.get("MATLAB_class", b"")
+                kind = kind.decode() if isinstance(kind, bytes) else str(kind)
+                if name.startswith("#"):
+                    continue
+                if kind == "char" and isinstance(item, h5py.Dataset):
+                    codes = np.asarray(item).T.ravel(order="F") if "MATLAB_empty" not in item.attrs else []
+                    out[name] = "".join(map(chr, codes))
+                elif not isinstance(item, h5py.Dataset) or kind not in _V73_NUMERIC:
+                    out[name] = None
+                elif "MATLAB_empty" in item.attrs:  # its dimensions stored in place of data
+                    out[name] = np.zeros((0, 0))
+                elif item.dtype.kind not in "fiub":  # complex: a compound of real and imag
+                    raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real numeric array")
+                else:
+                    out[name] = np.asarray(item).T
+    except RecordingError:
+        raise
+    except Exception as err:  # h5py: OSError on a corrupt file, others on odd layouts
+        cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise RecordingError(source, f"cannot read MATLAB v7.3 file: {_show(cause, 120)}") from None
+    return out
+
+
+def _check_mat(raw: bytes, source) -> tuple[list[str], list[str]]:
+    """The variables of a MAT v5/v7 file scipy.io.loadmat may read (plain real numeric arrays, text) and those it may
+    not (structs, cells, objects, sparse arrays: their contents never parsed): scipy can crash the interpreter
+    (segfault) on malformed ones, so the structure is checked first; a malformed or complex variable is refused."""
     order = {b"IM": "<", b"MI": ">"}.get(raw[126:128])
     if len(raw) < 128 or not order or struct.unpack_from(order + "H", raw, 124)[0] != 0x0100:
-        raise RecordingError(source, "not a MATLAB v5/v7 file (v4 and v7.3 are not supported)")
+        raise RecordingError(source, "not a MATLAB v5, v7 or v7.3 file (v4 is not supported)")
+    readable, other = [], []
     for mdtype, payload in _mat_elements(raw[128:], order, source):
         if mdtype == 15:  # miCOMPRESSED: one zlib-compressed element
             try:
@@ -432,14 +484,20 @@ def _check_mat(raw: bytes, source) -> None:
         dims = struct.unpack(order + f"{len(parts[1][1]) // 4}i", parts[1][1])
         name = parts[2][1].decode("latin-1")
         kind, data = parts[3] if len(parts) == 4 else (0, b"")
+        if flags & 0xFF in (1, 2, 3, 5):  # cell, struct, object, sparse: left unread
+            other.append(name)
+            continue
         if flags & 0xFF == 4 and kind in _MAT_TEXT and min(dims) >= 0 and not flags & 0x800:
             size = math.prod(dims) * _MAT_TEXT[kind]
             if len(data) >= size if kind in (16, 17) else len(data) == size:
-                continue  # text (a note, a controller's name): read, never a channel
+                readable.append(name)  # text (a note, a controller's name): read, never a channel
+                continue
         if not 6 <= flags & 0xFF <= 15 or flags & 0x800 or kind not in _MAT_NUMERIC \
                 or min(dims) < 0 or len(data) != math.prod(dims) * _MAT_NUMERIC[kind]:
             raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real "
                                          "numeric array or text")
+        readable.append(name)
+    return readable, other
 
 
 def _read_mat(raw: bytes, rig: str, source):
@@ -448,24 +506,17 @@ def _read_mat(raw: bytes, rig: str, source):
     The time variable and the 1x1 scalars a rig exports beside its channels (e.g. EMPS's
     controller gains) are named by the rig description (`time_variable`, `mat_scalars`).
     """
-    import scipy.io
-
     from .rigdesc import load_rig
 
     description = load_rig(rig)
-    _check_mat(raw, source)
-    try:
-        mat = scipy.io.loadmat(io.BytesIO(raw))
-    except Exception as err:  # scipy raises a zoo of types on corrupt files
-        cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
+    mat = _load_mat(raw, source)
     time_name = description.time_variable
     scalars = {n: float(np.asarray(mat[n]).ravel()[0]) for n in description.mat_scalars
-               if n in mat and np.asarray(mat[n]).size == 1}
-    text = {k for k in mat if not k.startswith("__") and np.asarray(mat[k]).dtype.kind == "U"}  # notes, names
-    if text & {time_name, *description.channels}:
+               if mat.get(n) is not None and np.asarray(mat[n]).size == 1 and np.asarray(mat[n]).dtype.kind in "fiub"}
+    text = {k for k in mat if not k.startswith("__") and (mat[k] is None or np.asarray(mat[k]).dtype.kind == "U")}
+    if text & {time_name, *description.channels}:  # notes, names, structs: never a channel
         name = min(text & {time_name, *description.channels})
-        raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real numeric array (text)")
+        raise RecordingError(source, f"MATLAB variable {_show(name)} is not a plain real numeric array")
     names = [k for k in mat if not k.startswith("__") and k not in scalars and k not in text]
     if time_name not in names:
         raise RecordingError(source, f"no {time_name!r} variable")
@@ -549,21 +600,13 @@ def _read_mat_split(path: Path, rig: str):
     for channel, spec in specs.items():
         source = path.with_name(spec["file"].replace("{run}", run))
         if source not in loaded:
-            raw = _read_bytes(source, source)
-            _check_mat(raw, source)
-            import scipy.io
-
-            try:
-                loaded[source] = scipy.io.loadmat(io.BytesIO(raw))
-            except Exception as err:  # scipy raises a zoo of types on corrupt files
-                cause = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-                raise RecordingError(source, f"cannot read MATLAB file: {_show(cause, 120)}") from None
+            loaded[source] = _load_mat(_read_bytes(source, source), source)
         mat, variable = loaded[source], spec["variable"]
         if variable not in mat:
             raise RecordingError(source, f"no variable {variable!r} (for {channel!r})")
         array = np.asarray(mat[variable])
-        if array.dtype.kind == "U":
-            raise RecordingError(source, f"variable {variable!r} (for {channel!r}) is text, not numbers")
+        if array.dtype.kind in "UO":
+            raise RecordingError(source, f"variable {variable!r} (for {channel!r}) is text or a struct, not numbers")
         column = int(spec.get("column", 1))
         if array.ndim != 2 or not 1 <= column <= array.shape[1]:
             raise RecordingError(source, f"variable {variable!r} (shape {array.shape}) has no column {column} (for {channel!r})")
