@@ -266,10 +266,11 @@ def test_a_dwell_time_stiction_is_screened_at_several_time_constants():
 
     cand = make_candidate(None, "dwell_time_stiction", "elbow")  # its parameters take no size from the data
     assert cand.variants == pytest.approx((0.4, 10.0))
-    assert cand.probes()[(("shape", 0.4), "gain")] == {"gain": 0.5, "time_constant": 0.4}
+    assert cand.probes()[(("shape", 0.4, 1.0), "gain")] == {"gain": 0.5, "time_constant": 0.4}
     rest = np.linspace(0.02, 1.0, 300)  # s, the rests before each break-away
     column = lambda tau: -(1.0 - np.exp(-rest / tau))  # noqa: E731 - the residual's change per unit of gain
-    cand.signature = {1.0: {"gain": column(2.0)}} | {("shape", tau): {"gain": column(tau)} for tau in cand.variants}
+    cand.signature = {1.0: {"gain": column(2.0)}} | {("shape", tau, 1.0): {"gain": column(tau)}
+                                                     for tau in cand.variants}
     r0 = 0.53 * (1.0 - np.exp(-rest / 0.4)) + 0.002 * np.random.default_rng(3).normal(size=rest.size)
     start_only = make_candidate(None, "dwell_time_stiction", "elbow")
     start_only.signature = {1.0: cand.signature[1.0]}
@@ -277,6 +278,38 @@ def test_a_dwell_time_stiction_is_screened_at_several_time_constants():
     assert cand.estimate["time_constant"] == 0.4
     assert cand.estimate["gain"] == pytest.approx(0.53, rel=0.02)
     assert cand.gain > 0.99 and start_only.gain < cand.gain - 0.01
+
+
+def test_a_stribeck_friction_is_screened_at_each_level_of_each_decay_speed(monkeypatch):
+    """probes(): a shape variant (the Stribeck speed v_s at 0.3 and 3 x its 0.03 rad/s start) is probed at each of
+    the candidate's levels (break-aways at 0.25, 1 and 4 x their start), not at the start's level alone: stick-slip
+    makes the signature depend on the break-away's size and its decay together. Seed 107's two-joint
+    watflex-f535260d, a shoulder break-away of 1.088 N m one way decaying by 0.0103 rad/s (start 3.29 N m: 5 % of the
+    65.8 N m peak command): screened at 1.3 % at v_s 0.03 and 0.6 % at 0.009 with the start's break-away, never fitted;
+    at 0.009 with 0.82 N m it screens at 80 %."""
+    from watflex_sim.diagnosis import screening
+
+    monkeypatch.setattr(screening, "scale_of", lambda data, p, where: 65.8 if p.scale == "effort" else 1.0)  # N m
+    cand = screening.make_candidate(None, "stribeck_friction", "shoulder")
+    assert cand.variants == pytest.approx((0.009, 0.09))  # rad/s
+    probes = cand.probes()
+    assert probes[(("shape", 0.009, 0.25), "breakaway_negative")] == pytest.approx(
+        {"breakaway_positive": 0.0, "breakaway_negative": 0.25 * 3.29, "v_s": 0.009})
+    assert cand.probe_step(("shape", 0.009, 0.25), "breakaway_negative") == pytest.approx(0.25 * 3.29)
+    shaped = {key for key in probes if isinstance(key[0], tuple) and key[0][0] == "shape"}
+    assert len(shaped) == 2 * 3 * 2  # variants x levels x break-aways
+    # screen(): the residual carries only the signature of the small break-away at the slow decay (stick-slip: another
+    # size or decay leaves another shape, here orthogonal ones)
+    rng = np.random.default_rng(5)
+    columns = {key: rng.normal(size=400) for key in probes}
+    cand.signature = {}
+    for (level, name), column in columns.items():
+        cand.signature.setdefault(level, {})[name] = column
+    r0 = -0.9 * columns[(("shape", 0.009, 0.25), "breakaway_negative")]  # 0.9 N m of break-away per unit column
+    screening.screen([cand], np.zeros((400, 0)), [], np.zeros(0), r0)
+    assert cand.estimate["v_s"] == 0.009
+    assert cand.estimate["breakaway_negative"] == pytest.approx(0.9, rel=0.05)
+    assert cand.gain > 0.99
 
 
 def test_shortlist_fits_screening_ties_too():

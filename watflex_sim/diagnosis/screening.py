@@ -78,7 +78,8 @@ class Candidate:
     checked: float | None = None  # rescreen: the gain simulated at (and half-way to) the estimate
     periodic: str = ""  # a ripple's periodic parameter (effects.Param.periodic), with the values screened in quadrature
     periods: tuple[float, ...] = ()  # (RIPPLE_CYCLES), besides its start
-    shape: str = ""  # a shape parameter with `variants` (effects.Param): the neutral ones are probed at each value too
+    shape: str = ""  # a shape parameter with `variants` (effects.Param): the neutral ones are probed at each value too,
+    # at each level: stick-slip makes a friction's signature bend with its size and its shape together (seed 107)
     variants: tuple[float, ...] = ()  # its values (physical units) besides its start
     ladder: str = ""  # a `wide` log-scaled parameter with a neutral (a link's stiffness): rescreen's `ladder`
 
@@ -101,17 +102,18 @@ class Candidate:
             for name, phase in (("amplitude", 0.0), (QUADRATURE, math.pi / 2)):
                 probes[(("period", period), name)] = {**at_zero, "amplitude": self.probe("amplitude"), "phase": phase,
                                                       self.periodic: period}
-        for value in self.variants:  # keyed ("shape", its value), likewise
-            probes.update({(("shape", value), name): {**at_zero, self.shape: value, name: self.probe(name)}
-                           for name in self.neutral})
+        for value in self.variants:  # keyed ("shape", its value, the level), likewise
+            probes.update({(("shape", value, level), name): {**at_zero, self.shape: value,
+                                                             name: self.probe(name, level)}
+                           for level in self.levels if level > 0 for name in self.neutral})
         return probes
 
     def probe_step(self, level, name: str) -> float:
         """How far from neutral the probe (level, name) moves its parameter: the column's divisor."""
         if name == "switch":
             return 1.0
-        if isinstance(level, tuple) and level[0] == "shape":  # a shape variant: each neutral parameter at its start
-            return self.probe(name) - self.neutral[name]
+        if isinstance(level, tuple) and level[0] == "shape":  # a shape variant: each neutral parameter at a level
+            return self.probe(name, level[2]) - self.neutral[name]
         if isinstance(level, tuple):  # a ripple's period variant: its amplitude at its start, either quadrature
             return self.probe("amplitude") - self.neutral["amplitude"]
         return self.probe(name, level) - self.neutral[name]
