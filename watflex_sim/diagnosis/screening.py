@@ -105,7 +105,7 @@ class Candidate:
         for value in self.variants:  # keyed ("shape", its value, the level), likewise
             probes.update({(("shape", value, level), name): {**at_zero, self.shape: value,
                                                              name: self.probe(name, level)}
-                           for level in self.levels if level > 0 for name in self.neutral})
+                           for level in self.levels for name in self.neutral})
         return probes
 
     def probe_step(self, level, name: str) -> float:

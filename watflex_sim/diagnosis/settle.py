@@ -77,16 +77,16 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
         # without it: two findings that stand for each other are each vague beside the other (the EMPS estimation run,
         # Stribeck's v_s screened at three values: Coulomb friction, 29.2 -> 4.0 x the noise, and a Stribeck friction
         # beside it, 4.0 -> 3.1 x, were dropped together, `unexplained` with no finding at 29 x the noise)
-        vague = vague[:1]
-        say("elimination", "dropping " + ", ".join(f"{current.effects[i]['effect']} at {current.effects[i]['where']}"
-                                                   for i in vague) + f": its 95 % intervals include {NO_EFFECT}")
-        rejected.extend({"effect": current.effects[i]["effect"], "where": current.effects[i]["where"],
-                         "parameters": {k: v for k, v in current.effects[i].items() if k not in ("effect", "where")},
-                         "intervals": ranges.get(i, {}),
-                         "why": f"its 95 % intervals include {NO_EFFECT} and validation without it is not far worse"}
-                        for i in vague)
+        drop = vague[0]
+        dropped = current.effects[drop]
+        say("elimination", f"dropping {dropped['effect']} at {dropped['where']}: "
+            f"its 95 % intervals include {NO_EFFECT}")
+        rejected.append({"effect": dropped["effect"], "where": dropped["where"],
+                         "parameters": {k: v for k, v in dropped.items() if k not in ("effect", "where")},
+                         "intervals": ranges.get(drop, {}),
+                         "why": f"its 95 % intervals include {NO_EFFECT} and validation without it is not far worse"})
         found = len(trained.effects)
-        current = Model([e for i, e in enumerate(trained.effects) if i not in vague], dict(trained.parameters))
+        current = Model([e for i, e in enumerate(trained.effects) if i != drop], dict(trained.parameters))
         if current.effects:  # its numbers were fitted beside the dropped: fitted again, from a round's fit of it if any
             say("elimination", "refitting the rest on the training blocks")
             current, new = refit_on_training(data, runner, round_models.get(current.places(), current))
