@@ -6,7 +6,7 @@ beside what else the shortlist says may be missing: `beside`), `scan_shape` a sh
 effect is linear in, to first order, are re-solved with the rig's columns by bounded least squares, the best rungs
 carried on by Gauss-Newton steps (a shape's on the slopes at each), and (values, their cost) returned for the fit to
 start from (effect_fit.fit_candidate: a period's best, a shape's every contender). Costs are the caller's (`cost` of a
-residual, in the fit's noise units).
+residual, in the fit's noise units). `shape_profile` looks around a fitted shape, the sizes scaled with it.
 """
 from __future__ import annotations
 
@@ -32,6 +32,9 @@ LOCAL_STEP = 0.2  # a shape scan's Gauss-Newton steps take the size parameters' 
 # this share of their distance from neutral: the probe's secant from neutral is a poor slope where stick-slip makes the
 # residual bend (seed 59, a dwell's gain re-solved to ~0.5, its probe level, at every rung)
 SHAPE_LADDER = 2.0  # a shape parameter's scan (a time constant, a Stribeck velocity): the ratio of one rung to the next
+PROFILE_SHAPES = (2 ** -0.5, 2 ** -0.25, 2 ** 0.25, 2 ** 0.5)  # a fitted shape's profile: the shape x these (half and
+# quarter rungs of SHAPE_LADDER) ...
+PROFILE_SIZES = (0.35, 0.5, 0.7, 1.0, 1.4, 2.0)  # ... each with all the sizes' distances from neutral x these
 RING_PHASES = 8  # a period rung of a cycle or less over the motion's range is also simulated at this many phases ...
 RING_SIZES = (0.5, 1.0)  # ... at these shares of the start's amplitude (period_scans: its linear estimate fails there)
 
@@ -63,6 +66,34 @@ def same_rung(cand: Candidate, a: dict[str, float], b: dict[str, float]) -> bool
     start, 0.023 at the best rung: a second fit of ~25 simulations for nothing)."""
     name = candidate_shape(cand)
     return abs(math.log(a[name] / b[name])) <= 0.5 * math.log(SHAPE_LADDER)
+
+
+def shape_profile(evaluate, cand: Candidate, model: Model) -> dict[str, float] | None:
+    """The candidate's values in `model` (its last effect, fitted) and at PROFILE_SHAPES x its shape, each with its
+    sizes' distances from neutral scaled by PROFILE_SIZES (one batch): the values of the least |r|^2, or None where
+    the fit itself leaves the least (or the candidate has no shape). A valley narrower than a scan's rung runs diagonally
+    through shape and size: the data pin the effect at the speed (or rest) they sample, and a faster decay is made up
+    by a larger size. Levenberg-Marquardt does not walk it: its finite difference in the shape (0.1 in log) steps
+    across it (seed 107's watflex-f535260d, a one-way shoulder Stribeck friction of 1.088 N m at v_s 0.0103 rad/s:
+    fitted at 1.61 N m with v_s still the 0.009 it started from, |r|^2 2.3e5 in noise units; the truth 3.7e4, and
+    1.53 N m at 0.0103 6.2e5), nor does the scan's Gauss-Newton on slopes stick-slip bends. Scaling all sizes
+    together follows the valley of any direction's excess at once."""
+    name = candidate_shape(cand)
+    if not name:
+        return None
+    fitted = {n: v for n, v in model.effects[-1].items() if n in cand.slots}
+
+    def clipped(n: str, v: float) -> float:
+        return float(np.clip(v, cand.slots[n].low, cand.slots[n].high))
+
+    trials = [{**fitted, name: clipped(name, fitted[name] * shape),
+               **{n: clipped(n, cand.neutral[n] + k * (fitted[n] - cand.neutral[n])) for n in cand.neutral}}
+              for shape in PROFILE_SHAPES for k in PROFILE_SIZES]
+    models = [Model(model.effects[:-1] + [{**model.effects[-1], **t}], dict(model.parameters)) for t in trials]
+    runs = evaluate([model] + models)
+    costs = [math.inf if r is None else float(r @ r) for r in runs]
+    best = int(np.argmin(costs))
+    return trials[best - 1] if best > 0 else None
 
 
 def shape_ladder(slot: Slot) -> list[float]:
