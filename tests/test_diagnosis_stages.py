@@ -2083,8 +2083,8 @@ def test_a_fitted_shape_is_profiled_along_the_valley_its_sizes_make():
     slots = {n: Slot(("effect", -1, n), 0.0, 5.0) for n in ("breakaway_positive", "breakaway_negative")}
     slots["v_s"] = Slot(("effect", -1, "v_s"), 0.001, 1.0, log=True)
     start = {"breakaway_positive": 0.0, "breakaway_negative": 1.508, "v_s": 0.009}
-    cand = Candidate("stribeck_friction", "shoulder", start, slots, {"breakaway_positive": 0.0, "breakaway_negative": 0.0},
-                     estimate=start)
+    neutral = {"breakaway_positive": 0.0, "breakaway_negative": 0.0}
+    cand = Candidate("stribeck_friction", "shoulder", start, slots, neutral, estimate=start)
     fitted = cand.model(Model(), start)
     (r_fit,) = evaluate([fitted])
     found = shape_profile(evaluate, cand, fitted)
@@ -2099,7 +2099,8 @@ def test_a_fitted_shape_is_profiled_along_the_valley_its_sizes_make():
     data = SimpleNamespace(rig=SimpleNamespace(parameters={}), idle=set())
     with (patch.object(effect_fit, "fit_from", stays), patch.object(effect_fit, "scan_shape", lambda *args: []),
           patch.object(effect_fit, "carry_on", lambda evaluate, cand, first, iters: first)):
-        kept = effect_fit.fit_candidate(data, evaluate, Model(), cand, np.zeros((speeds.size, 0)), 6)["model"].effects[-1]
+        kept = effect_fit.fit_candidate(data, evaluate, Model(), cand, np.zeros((speeds.size, 0)), 6)["model"]
+    kept = kept.effects[-1]
     assert kept["v_s"] == found["v_s"] and kept["breakaway_negative"] == found["breakaway_negative"]
 
 

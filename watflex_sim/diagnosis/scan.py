@@ -71,13 +71,13 @@ def same_rung(cand: Candidate, a: dict[str, float], b: dict[str, float]) -> bool
 def shape_profile(evaluate, cand: Candidate, model: Model) -> dict[str, float] | None:
     """The candidate's values in `model` (its last effect, fitted) and at PROFILE_SHAPES x its shape, each with its
     sizes' distances from neutral scaled by PROFILE_SIZES (one batch): the values of the least |r|^2, or None where
-    the fit itself leaves the least (or the candidate has no shape). A valley narrower than a scan's rung runs diagonally
-    through shape and size: the data pin the effect at the speed (or rest) they sample, and a faster decay is made up
-    by a larger size. Levenberg-Marquardt does not walk it: its finite difference in the shape (0.1 in log) steps
-    across it (seed 107's watflex-f535260d, a one-way shoulder Stribeck friction of 1.088 N m at v_s 0.0103 rad/s:
-    fitted at 1.61 N m with v_s still the 0.009 it started from, |r|^2 2.3e5 in noise units; the truth 3.7e4, and
-    1.53 N m at 0.0103 6.2e5), nor does the scan's Gauss-Newton on slopes stick-slip bends. Scaling all sizes
-    together follows the valley of any direction's excess at once."""
+    the fit itself leaves the least (or the candidate has no shape). A valley narrower than a scan's rung runs
+    diagonally through shape and size: the data pin the effect at the speed (or rest) they sample, and a faster decay
+    is made up by a larger size. Levenberg-Marquardt does not walk it: its finite difference in the shape (0.1 in
+    log) steps across it (seed 107's watflex-f535260d, a one-way shoulder Stribeck friction of 1.088 N m at v_s
+    0.0103 rad/s: fitted at 1.61 N m with v_s still the 0.009 it started from, |r|^2 2.3e5 in noise units; the truth
+    3.7e4, and 1.53 N m at 0.0103 6.2e5), nor does the scan's Gauss-Newton on slopes stick-slip bends. Scaling all
+    sizes together follows the valley of any direction's excess at once."""
     name = candidate_shape(cand)
     if not name:
         return None
