@@ -98,3 +98,32 @@ def test_the_final_refit_starts_again_from_a_step_the_profile_says_costs_less_be
     assert start(evaluate_for(2000.0), 0.010).effects[0]["seconds"] == 0.011
     assert start(evaluate_for(2000.0), 0.011) is None
     assert start(evaluate_for(300.0), 0.010) is None  # 0.5 |r|^2 differs by ~0.22 per step
+
+
+def test_the_final_refit_starts_again_on_a_valley_narrower_than_the_profiles_steps(monkeypatch):
+    """fine_start(): a one-way Stribeck friction whose data sample it at 0.020-0.030 rad/s (break-away x
+    exp(-(v / v_s)^2) there) leaves a valley diagonal in v_s and break-away; the final refit stopped on its wall (seed
+    111, watflex-26368bfd: 1.055 N m positive only at v_s 0.02451 rad/s, refit at 1.150 / 0.0152 N m and 0.02356, the
+    truth 13,348 |r|^2 lower; level_start's steps of 2^(1/2) in v_s land on the walls). The fine profile's least point
+    lies below the estimate beyond what the noise resolves (1.96^2 s^2, s = 1 here), its break-away within 3 % and
+    its v_s within 1 % of the truth; at the truth there is nothing to start from."""
+    monkeypatch.setattr(level, "scale_of", lambda data, param, where: 10.0 if param.scale else 1.0)  # 10 N m peak
+    speeds = np.linspace(0.020, 0.030, 50)  # rad/s
+    noise = np.random.default_rng(4).normal(0.0, 1.0, speeds.size)
+    truth = {"breakaway_positive": 1.055, "breakaway_negative": 0.0, "v_s": 0.02451}
+
+    def evaluate(models):
+        def excess(e: dict) -> np.ndarray:
+            return e["breakaway_positive"] * np.exp(-(speeds / e["v_s"]) ** 2)
+        return [(excess(m.effects[0]) - excess(truth)) / 0.01 + noise for m in models]  # noise of 0.01 N m
+
+    def start(values: dict) -> tuple[Model, Model | None]:
+        model = Model([{"effect": "stribeck_friction", "where": "elbow", **values}], {})
+        return model, level.fine_start(None, evaluate, model, 3, evaluate([model])[0])
+
+    model, found = start({"breakaway_positive": 1.150, "breakaway_negative": 0.0152, "v_s": 0.02356})
+    cost = lambda m: float(evaluate([m])[0] @ evaluate([m])[0])  # noqa: E731
+    assert cost(found) < cost(model) - 1.96**2
+    assert abs(found.effects[0]["breakaway_positive"] / truth["breakaway_positive"] - 1) < 0.03
+    assert abs(found.effects[0]["v_s"] / truth["v_s"] - 1) < 0.01
+    assert start(truth)[1] is None

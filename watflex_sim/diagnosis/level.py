@@ -5,7 +5,8 @@ parameter `name`, the model with it there and every other slot re-solved, and it
 units), to first order; `level_reach(...)` walks it out from the estimate (period.walk) and returns the ranges of the
 effect parameters over the points the data cannot tell from the best (period.limits), for the 95 % intervals;
 `level_start(...)` the point of a short profile that costs less than the estimate beyond the noise, for the final
-refit to start again from. `levels` lists an effect's parameters to profile, `shape_name` its shape parameter.
+refit to start again from, and `fine_start(...)` the same of a fine grid of a shape with its sizes scaled. `levels`
+lists an effect's parameters to profile, `shape_name` its shape parameter.
 
 Why: along a shape parameter (a dwell-time stiction's time constant, a Stribeck velocity) the parameters that set
 the effect's size act differently at each value, so the residual bends: a long curved valley whose far end a Jacobian
@@ -26,6 +27,9 @@ from .period import reach_of, stepped, walk, within
 
 LEVEL_RATIO = 2**0.5  # one value of a shape parameter's profile to the next (the scan's rungs are 2x apart)
 START_STEPS = 2  # level_start profiles this many values either side of the estimate
+FINE_SHAPES = tuple(2 ** (k / 16) for k in (-2, -1, 0, 1, 2))  # fine_start: a shape x these (sixteenths of the scan's
+# factor-2 rungs) ...
+FINE_SIZES = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1)  # ... each with its effect's sizes' distances from neutral x these
 
 
 def shape_name(effect: str) -> str:
@@ -125,3 +129,36 @@ def level_start(data: Data, evaluate, model: Model, slots: list[Slot], J: np.nda
                 if cost < min(least, own[0] - resolved):
                     best, least = m, cost
     return best
+
+
+def fine_start(data: Data, evaluate, model: Model, p: int, r: np.ndarray) -> Model | None:
+    """A start on a valley narrower than level_start's steps: each shape effect's shape (`shape_name`) x FINE_SHAPES,
+    with its sizes' distances from neutral x FINE_SIZES (29 simulations a shape effect, one batch), the point of least
+    |r|^2 where it is below the model's by more than the noise resolves (1.96^2 x s^2, `p` parameters fitted); None
+    where none is. `r`: the model's residual in `evaluate`'s units. A one-way Stribeck friction sampled near one speed
+    leaves a valley diagonal in v_s and break-away a few per cent wide; the final refit's finite differences step across
+    it and level_start's profile (v_s x 2^(+-1/2), the break-aways re-solved to first order) lands on its walls (seed
+    111, watflex-26368bfd, 1.055 N m positive only at v_s 0.02451 rad/s: refit at 1.150 / 0.0152 N m and 0.02356,
+    |r|^2 37,126; at v_s x 2^(1/16) with the sizes x 0.9, 12,724 less, and refit from there 1.038 / 0.0013 N m at
+    0.02464, 17,863 less)."""
+    trials = []
+    for i, effect in enumerate(model.effects):
+        name = shape_name(effect["effect"])
+        if not name or name not in effect:
+            continue
+        params = {q.name: q for q in CATALOGUE[effect["effect"]][1] if q.name in effect}
+        size = {n: scale_of(data, q, effect["where"]) for n, q in params.items()}
+        clip = lambda n, v: float(np.clip(v, params[n].low * size[n], params[n].high * size[n]))  # noqa: E731
+        neutral = {n: q.neutral * size[n] for n, q in params.items() if q.neutral is not None}
+        for shape in FINE_SHAPES:
+            for k in FINE_SIZES:
+                if shape != 1.0 or k != 1.0:
+                    values = {name: clip(name, effect[name] * shape),
+                              **{n: clip(n, v + k * (effect[n] - v)) for n, v in neutral.items()}}
+                    trials.append(Model([{**e, **values} if j == i else e for j, e in enumerate(model.effects)],
+                                        dict(model.parameters)))
+    if not trials:
+        return None
+    costs = [np.inf if q is None else float(q @ q) for q in evaluate(trials)]
+    best = int(np.argmin(costs))
+    return trials[best] if costs[best] < float(r @ r) - 1.96**2 * residual_variance(r, p) else None

@@ -13,7 +13,8 @@ before the refit. `calibrate_noise` adds to `data` that noise again on the refit
 leaves in closed loop and what a finer discretisation changes; `raise_noise_floor` measures them again with a
 model's findings in and raises the floors they exceed. `final_refit` refits a chosen model's parameters on all the
 data (again from a point further along a shape or quantised parameter where a profile there costs less:
-level.level_start) and returns it with its simulations and its counterpart fitted on the training blocks.
+level.level_start, level.fine_start) and returns it with its simulations and its counterpart fitted on the training
+blocks.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from .data import (Data, Model, add_closed_loop_noise, add_coloured_noise, add_d
                    unit_change)
 from .effect_fit import scored
 from .fitting import Slot, effect_slots_of, jacobian, levenberg, rig_slots, value_of
-from .level import level_start, levels
+from .level import fine_start, level_start, levels
 from .pattern import compass_worth, pattern_search
 from .refine import POLISH_ITERATIONS, carry_on_each, in_noise
 from .runner import Runner, evaluator, in_units
@@ -263,7 +264,8 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
     where a short profile there predicts less cost beyond what the noise resolves (level.level_start), kept if it
     ends lower: Levenberg-Marquardt stops on a rough cost short of a valley's floor, and a quantised parameter is
     searched a step at a time (seed 64, watflex-7c2659f4: an 11 ms delay kept at 10 ms, which costs 3.5 x the 11 ms
-    step's 0.5 |r|^2 of 2,668; seed 55, watflex-52923f62: a dwell's time constant at 0.38 s, 0.54 s 564 lower).
+    step's 0.5 |r|^2 of 2,668; seed 55, watflex-52923f62: a dwell's time constant at 0.38 s, 0.54 s 564 lower); and
+    from a point of a fine profile of a shape, its sizes scaled with it (level.fine_start), on the same terms.
     Returns (the model, its simulations, its counterpart fitted on the training blocks alone: `model` itself, or where
     the refit started again, the training blocks' fit from that start, so that their difference, which the intervals
     take as the fit's scatter, is not the jump between two valleys). The model as given where the refit diverges."""
@@ -272,14 +274,25 @@ def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording])
     refit, _, J = levenberg(evaluate, model, free, [value_of(model, s) for s in free], None, POLISH_ITERATIONS)
     trained, r = model, evaluate([refit])[0] if any(levels(data, e) for e in refit.effects) else None
     start = level_start(data, evaluate, refit, free, J, r) if r is not None else None
-    if start is not None:
-        again = levenberg(evaluate, start, free, [value_of(start, s) for s in free], None, POLISH_ITERATIONS)[0]
-        r_again = evaluate([again])[0]
-        if r_again is not None and float(r_again @ r_again) < float(r @ r):
-            refit = again
-            trained = _training_fit(data, runner, start, free)
+    refit, trained, r = _again_from(data, runner, evaluate, free, start, refit, trained, r)
+    start = fine_start(data, evaluate, refit, len(free), r) if r is not None else None
+    refit, trained, r = _again_from(data, runner, evaluate, free, start, refit, trained, r)
     new = runner.simulate(refit)
     return (refit, new, trained) if new is not None else (model, sims, model)
+
+
+def _again_from(data: Data, runner: Runner, evaluate, free: list[Slot], start: Model | None, refit: Model,
+                trained: Model, r: np.ndarray) -> tuple[Model, Model, np.ndarray]:
+    """final_refit's (refit, its training-blocks counterpart, its residual), refit again from `start` (None: as they
+    are) and kept where that ends with a smaller |r|^2, its counterpart then fitted on the training blocks from
+    `start`."""
+    if start is None:
+        return refit, trained, r
+    again = levenberg(evaluate, start, free, [value_of(start, s) for s in free], None, POLISH_ITERATIONS)[0]
+    r_again = evaluate([again])[0]
+    if r_again is None or float(r_again @ r_again) >= float(r @ r):
+        return refit, trained, r
+    return again, _training_fit(data, runner, start, free), r_again
 
 
 def refit_on_training(data: Data, runner: Runner, model: Model) -> tuple[Model, list[Recording] | None]:
