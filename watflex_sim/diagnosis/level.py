@@ -142,23 +142,32 @@ def fine_start(data: Data, evaluate, model: Model, p: int, r: np.ndarray) -> Mod
     |r|^2 37,126; at v_s x 2^(1/16) with the sizes x 0.9, 12,724 less, and refit from there 1.038 / 0.0013 N m at
     0.02464, 17,863 less)."""
     trials = []
+    pairs = [(shape, k) for shape in FINE_SHAPES for k in FINE_SIZES if shape != 1.0 or k != 1.0]
     for i, effect in enumerate(model.effects):
         name = shape_name(effect["effect"])
         if not name or name not in effect:
             continue
         params = {q.name: q for q in CATALOGUE[effect["effect"]][1] if q.name in effect}
         size = {n: scale_of(data, q, effect["where"]) for n, q in params.items()}
-        clip = lambda n, v: float(np.clip(v, params[n].low * size[n], params[n].high * size[n]))  # noqa: E731
+        bounds = {n: (q.low * size[n], q.high * size[n]) for n, q in params.items()}
         neutral = {n: q.neutral * size[n] for n, q in params.items() if q.neutral is not None}
-        for shape in FINE_SHAPES:
-            for k in FINE_SIZES:
-                if shape != 1.0 or k != 1.0:
-                    values = {name: clip(name, effect[name] * shape),
-                              **{n: clip(n, v + k * (effect[n] - v)) for n, v in neutral.items()}}
-                    trials.append(Model([{**e, **values} if j == i else e for j, e in enumerate(model.effects)],
-                                        dict(model.parameters)))
+        for values in valley_points(effect, name, bounds, neutral, pairs):
+            trials.append(Model([values if j == i else e for j, e in enumerate(model.effects)], dict(model.parameters)))
     if not trials:
         return None
     costs = [np.inf if q is None else float(q @ q) for q in evaluate(trials)]
     best = int(np.argmin(costs))
     return trials[best] if costs[best] < float(r @ r) - 1.96**2 * residual_variance(r, p) else None
+
+
+def valley_points(values: dict, name: str, bounds: dict[str, tuple[float, float]], neutral: dict[str, float],
+                  pairs: list[tuple[float, float]]) -> list[dict]:
+    """Points along a shape-size valley (scan.shape_profile, fine_start): per (shape factor, size factor) in `pairs`,
+    `values` with its shape `name` x the first and each size's distance from `neutral` x the second, each value
+    clipped to its `bounds` (low, high)."""
+    def clip(n: str, v: float) -> float:
+        return float(np.clip(v, *bounds[n]))
+
+    return [{**values, name: clip(name, values[name] * shape), **{n: clip(n, v + k * (values[n] - v))
+                                                                  for n, v in neutral.items()}}
+            for shape, k in pairs]

@@ -17,7 +17,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from .data import Model
 from .fitting import Slot, refit_step
-from .level import shape_name
+from .level import shape_name, valley_points
 from .screening import Candidate
 
 PERIOD_CYCLES_STEP = 0.5  # cycles over the motion's range: the spacing of a period scan where the range holds a cycle
@@ -82,13 +82,8 @@ def shape_profile(evaluate, cand: Candidate, model: Model) -> dict[str, float] |
     if not name:
         return None
     fitted = {n: v for n, v in model.effects[-1].items() if n in cand.slots}
-
-    def clipped(n: str, v: float) -> float:
-        return float(np.clip(v, cand.slots[n].low, cand.slots[n].high))
-
-    trials = [{**fitted, name: clipped(name, fitted[name] * shape),
-               **{n: clipped(n, cand.neutral[n] + k * (fitted[n] - cand.neutral[n])) for n in cand.neutral}}
-              for shape in PROFILE_SHAPES for k in PROFILE_SIZES]
+    bounds = {n: (slot.low, slot.high) for n, slot in cand.slots.items()}
+    trials = valley_points(fitted, name, bounds, cand.neutral, [(s, k) for s in PROFILE_SHAPES for k in PROFILE_SIZES])
     models = [Model(model.effects[:-1] + [{**model.effects[-1], **t}], dict(model.parameters)) for t in trials]
     runs = evaluate([model] + models)
     costs = [math.inf if r is None else float(r @ r) for r in runs]
