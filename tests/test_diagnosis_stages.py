@@ -2783,8 +2783,8 @@ def test_a_side_the_noise_makes_look_like_friction_is_not_ruled_out():
 
     truth = [{"effect": "coulomb_friction", "where": "hub", "torque_positive": 0.0, "torque_negative": 0.0984}]  # N m
     recs = []
-    for i, direction in enumerate(("positive", "negative")):
-        scenario = load_scenario("laser_arm_step", [f"direction={direction}", "duration_s=4", f"seed={20 + i}"])
+    for i, way in enumerate(("positive", "negative")):
+        scenario = load_scenario("laser_arm_step", [f"direction={way}", "duration_s=4", f"seed={20 + i}"])
         scenario["effects"] = truth
         recs.append(simulate(scenario).recording)
     data = prepare(recs, ["up", "down"])

@@ -9,9 +9,11 @@ bound on the bias it can cause) and a cost that stick-slip makes rough or a vall
 profile: the estimate is known only up to where the cost's smooth trend, the other parameters following, rises above
 its roughness), and along a ripple's period, where the cost's valley bends past any Jacobian's reach, a profile
 (period.profile_reach), and along a shape parameter (a time constant, a Stribeck velocity) or a quantised one (a
-delay) theirs (level.level_reach), and the split between the effects and the rig's parameters they act like, followed to the
-datasheet's values as far as the discretisation lets the data prefer it (`split_reach`). Knob-tied pairs (an effect's ratio and the rig
-parameter turning the same knob) share one Jacobian column, and the ratio's interval also spans the datasheet's
+delay) theirs (level.level_reach), and the split between the effects and the rig's parameters they act like,
+followed to the datasheet's values as far as the discretisation lets the data prefer it (`split_reach`), and an
+effect size's neutral value where the data are as near the model's noisy realisations with it there
+(`realisation_reach`). Knob-tied pairs (an effect's ratio and the rig parameter turning the same knob) share one
+Jacobian column, and the ratio's interval also spans the datasheet's
 split of their product (`nominal_split`).
 """
 from __future__ import annotations
@@ -91,7 +93,9 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     estimate (`discretisation_error`). A ripple's period, a shape and a quantised parameter are profiled (the others
     re-solved at each value): their intervals reach as far along the valley as the data cannot tell from its best
     point (seed 59, watflex-1e32daae: a time constant of 0.58 s with [0.37, 0.90] from the Jacobian, [0.21, 2.1]
-    profiled, the truth 0.98; a delay's steps beside the one found)."""
+    profiled, the truth 0.98; a delay's steps beside the one found). Last, a size reaches its neutral value where the
+    data are as near one of the noisy realisations of the model with it there as to the model's own
+    (`realisation_reach`: in closed loop, what the rig's noise does to a rig at rest can mimic a friction)."""
     out: dict[int, dict] = {}
     for i, effect in enumerate(model.effects):
         for p in CATALOGUE[effect["effect"]][1]:
@@ -151,10 +155,10 @@ def realisation_reach(data: Data, runner: Runner, model: Model, per: np.ndarray,
     seeds, the final model's own) as they are on average to the final model's own (`costs`: |r|^2 of those, in
     `per`'s units). In closed loop the rig's noise fed back moves a rig at rest, a friction one way only turns that
     into a creep, and where a realisation creeps or not decides where an arm stops: a noise-free re-simulation of
-    the truth then fits worse than a biased estimate, and no linearised replicate sees it (seed 113's laser_arm-b895983b,
-    a one-way hub Coulomb friction of 0 / 0.0984 N m on 2 mrad steps: fitted 0.027 [0.023, 0.031] / 0.098; the truth
-    noise-free |r|^2 9,694, the estimate 5,446, replicate moves +-0.0005 N m; with the noise on, 8,245-8,906 in 3 of 6
-    seeds of the truth and 9,010-9,862 in all 6 of the estimate's)."""
+    the truth then fits worse than a biased estimate, and no linearised replicate sees it (seed 113's
+    laser_arm-b895983b, a one-way hub Coulomb friction of 0 / 0.0984 N m on 2 mrad steps: fitted 0.027 [0.023, 0.031]
+    / 0.098; the truth noise-free |r|^2 9,694, the estimate 5,446, replicate moves +-0.0005 N m; with the noise on,
+    8,245-8,906 in 3 of 6 seeds of the truth and 9,010-9,862 in all 6 of the estimate's)."""
     if len(costs) < 2:
         return
     seeds = [NOISE_SEED + 1 + k for k in range(REPLICATES)]
