@@ -2797,8 +2797,7 @@ def test_a_side_the_noise_makes_look_like_friction_is_not_ruled_out():
             return float(np.sum((residual_vector(data, runs, "all") / per) ** 2))
 
         assert cost(sims) < cost(runner.simulate(Model(truth))) - 1000  # the trap: noise-free, the estimate fits better
-        seeds = [uncertainty.NOISE_SEED + 1 + k for k in range(uncertainty.REPLICATES)]
-        costs = [cost(runs) for runs in runner.simulate_seeds(estimate, seeds)]
+        costs = [cost(runs) for runs in runner.simulate_seeds(estimate, list(uncertainty.REPLICATE_SEEDS))]
         out = {0: {"torque_positive": (0.023, 0.031), "torque_negative": (0.0946, 0.1005)}}
         uncertainty.realisation_reach(data, runner, estimate, per, costs, out)
     assert out[0]["torque_positive"] == (0.0, 0.031)

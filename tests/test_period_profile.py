@@ -122,7 +122,7 @@ def test_a_ripple_found_before_a_later_effect_has_its_period_scanned_again(monke
     the model has the ripple at 0.33 rad, where Levenberg-Marquardt alone stays (checked below). The rescan must bring
     the period within 1 % of the truth and the cost below a hundredth of the start's; a model at the truth is
     returned as it is."""
-    from watflex_sim.diagnosis import period, refine
+    from watflex_sim.diagnosis import motion as motion_sizes, refine
     from watflex_sim.diagnosis.fitting import levenberg
 
     motion, x = 0.544, np.linspace(0.0, 0.544, 600)  # rad
@@ -142,7 +142,7 @@ def test_a_ripple_found_before_a_later_effect_has_its_period_scanned_again(monke
 
     monkeypatch.setattr(refine, "in_noise", lambda data, runner: evaluate)
     monkeypatch.setattr(refine, "scale_of", lambda data, param, where: motion)
-    monkeypatch.setattr(period, "scale_of", lambda data, param, where: 1.0)  # a spring's neutral: 0 in any unit
+    monkeypatch.setattr(motion_sizes, "scale_of", lambda data, param, where: 1.0)  # a spring's neutral: 0 in any unit
     monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "train": {"noise_ratio": sims}})
     free = [Slot(("effect", 0, "amplitude"), -15.0, 15.0), Slot(("effect", 0, "period"), 0.2 * motion, 200 * motion, log=True),
             Slot(("effect", 0, "phase"), -math.pi, math.pi), Slot(("effect", 0, "spring"), -50.0, 50.0),

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..effects import CATALOGUE
 from ..engine import SimulationError, simulate
 from ..model import ConfigError
 from ..recording import Recording
@@ -66,6 +67,13 @@ def scale_of(data: Data, param, where: str) -> float:
     if param.scale == "effort/speed":
         return effort / (peak_speed(data) or 1.0)
     return max(values, default=1.0) or 1.0
+
+
+def neutral_values(data: Data, effect: dict) -> dict[str, float]:
+    """The values at which the effect's parameters that have one vanish (effects.Param.neutral: a friction side's 0,
+    a ratio's 1), in the data's units (`scale_of`)."""
+    return {p.name: p.neutral * scale_of(data, p, effect["where"])
+            for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None}
 
 
 def simulated_effort(data: Data) -> float:

@@ -23,7 +23,7 @@ import numpy as np
 from ..effects import CATALOGUE
 from .data import Model
 from .fitting import Slot, at_internal, refit_step, residual_variance, value_of
-from .motion import scale_of
+from .motion import neutral_values
 
 PROFILE_RATIO = 1.12  # one period of the profile to the next
 PROFILE_STEPS = 4  # periods each side of the estimate at first ...
@@ -147,8 +147,7 @@ def within(points: list, r: np.ndarray, p: int, replicates: list[np.ndarray], er
 def neutral_others(data, effect: dict) -> dict[str, float]:
     """The values at which a ripple's parameters other than its amplitude vanish (a spring's 0), in the data's
     units (motion.scale_of)."""
-    params = CATALOGUE[effect["effect"]][1]
-    return {p.name: p.neutral * scale_of(data, p, effect["where"]) for p in params if p.neutral is not None and p.name != "amplitude"}
+    return {n: v for n, v in neutral_values(data, effect).items() if n != "amplitude"}
 
 
 def _walk(evaluate, model: Model, index: int, slots: list[Slot], J: np.ndarray, r: np.ndarray,

@@ -28,7 +28,7 @@ from .data import Data, Model, residual_vector, unit_change
 from .fitting import (Slot, at_internal, effect_slots_of, fd_step, intervals, jacobian, refit_cost, refit_step, residual_variance,
                       rig_slots, value_of)
 from .level import level_reach, levels
-from .motion import scale_of
+from .motion import neutral_values
 from .period import neutral_others, periodic_name, profile_reach
 from .runner import Runner, evaluator, in_units
 from .tolerance import knob_partner
@@ -39,6 +39,7 @@ NOISE_SEED = 7  # fixed: the closed-loop noise floor is the same on every run
 DISCRETISATION_REACH = 2.0  # x what a FINER x finer model changes in the residual: the error against a converged
 # model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
 REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
+REPLICATE_SEEDS = tuple(NOISE_SEED + 1 + k for k in range(REPLICATES))
 SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
 SPLIT_STEP = 0.05  # x an effect parameter's value (internal units; a log one: 5 %): split_reach's local columns
 SPLIT_LINE = (0.5, 1.0, 1.5, 2.0)  # x the move to the datasheet's split: where split_reach simulates the model
@@ -114,7 +115,7 @@ def final_intervals(data: Data, runner: Runner, model: Model, sims: list[Recordi
     J = gentler_side(evaluate, model, slots, u, r, jacobian(evaluate, model, slots, u, r), len(effect_slots))
     J = tie_knob_columns(data, model, slots, J)
     prior = [tolerance_sd(s) for s in slots]
-    noisy = runner.simulate_seeds(model, [NOISE_SEED + 1 + k for k in range(REPLICATES)])
+    noisy = runner.simulate_seeds(model, list(REPLICATE_SEEDS))
     replicates = [residual_vector(data, noisy_sims, "all") / per - r for noisy_sims in noisy if noisy_sims is not None]
     error = discretisation_error(data, runner, model, r, per)
     centre = [tolerance_centre(s) for s in slots]
@@ -161,21 +162,20 @@ def realisation_reach(data: Data, runner: Runner, model: Model, per: np.ndarray,
     8,245-8,906 in 3 of 6 seeds of the truth and 9,010-9,862 in all 6 of the estimate's)."""
     if len(costs) < 2:
         return
-    seeds = [NOISE_SEED + 1 + k for k in range(REPLICATES)]
     reference = float(np.mean(costs))
     for i, effect in enumerate(model.effects):
-        for q in CATALOGUE[effect["effect"]][1]:
-            if q.neutral is None or q.name not in effect or q.name not in out.get(i, {}):
+        for name, neutral in neutral_values(data, effect).items():
+            if name not in out.get(i, {}):
                 continue
-            neutral = q.neutral * scale_of(data, q, effect["where"])
-            low, high = out[i][q.name]
+            low, high = out[i][name]
             if low <= neutral <= high:
                 continue
-            moved = Model([{**e, q.name: neutral} if j == i else e for j, e in enumerate(model.effects)],
+            moved = Model([{**e, name: neutral} if j == i else e for j, e in enumerate(model.effects)],
                           dict(model.parameters))
-            runs = [residual_vector(data, sims, "all") / per for sims in runner.simulate_seeds(moved, seeds) if sims]
+            runs = [residual_vector(data, sims, "all") / per
+                    for sims in runner.simulate_seeds(moved, list(REPLICATE_SEEDS)) if sims]
             if runs and min(float(x @ x) for x in runs) <= reference:
-                out[i][q.name] = (min(low, neutral), max(high, neutral))
+                out[i][name] = (min(low, neutral), max(high, neutral))
 
 
 def widen(out: dict[int, dict], slots: list[Slot], reach: dict[int, tuple[float, float]]) -> None:
