@@ -326,6 +326,24 @@ def test_shortlist_fits_screening_ties_too():
     assert shortlist(ranked(0.0, 0.0)) == []
 
 
+def test_shortlist_does_not_fit_a_runner_up_far_below_the_leader():
+    """shortlist(): a runner-up that screens and simulates below SCREEN_FLOOR (10 %) of the leader's gain (the less
+    of the leader's screened and simulated) is not fitted. Seed 114, laser_arm-2996f539: a motor-current gain screened
+    and simulated at 15.4 %, a hub ripple at 1.13 % and 0.06 %, whose period scan took ~500 of the round's 657
+    simulations and fitted worse than no effect. One that simulates above the floor is fitted; a leader its simulation
+    refutes (checked < 0) prunes nothing."""
+    from watflex_sim.diagnosis import Candidate, shortlist
+
+    def ranked(*pairs):
+        return [Candidate(f"e{i}", "x", {}, {}, {}, gain=g, checked=c) for i, (g, c) in enumerate(pairs)]
+
+    assert [c.effect for c in shortlist(ranked((0.154, 0.154), (0.0113, 0.0006), (0.0099, 0.0099)))] == ["e0"]
+    assert [c.effect for c in shortlist(ranked((0.154, 0.154), (0.0113, 0.02)))] == ["e0", "e1"]
+    assert [c.effect for c in shortlist(ranked((0.995, 0.9975), (0.077, -0.0025), (0.076, 0.047), (0.039, 0.059)))] \
+        == ["e0"]  # seed 114, watflex-b3ef43bc: an elbow-angle offset; its 3 friction runners-up took 950 simulations
+    assert [c.effect for c in shortlist(ranked((0.66, -0.95), (0.05, 0.04)))] == ["e0", "e1"]  # nothing pruned
+
+
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).

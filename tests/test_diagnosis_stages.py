@@ -1,5 +1,6 @@
 """The diagnosis' stages alone (issue 14), on inputs whose answer is known in closed form."""
 import math
+import types
 from unittest.mock import patch
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 from watflex_sim import load_scenario, simulate
 from watflex_sim.diagnosis import Model, Slot, intervals, prepare
 from watflex_sim.diagnosis.data import NO_NOISE_FLOOR, measured_noise, split_blocks
-from watflex_sim.diagnosis.explain import direction, indistinct, physical_place, units_at
+from watflex_sim.diagnosis.explain import direction, finding, indistinct, physical_place, units_at
 from watflex_sim.diagnosis.fitting import huber_threshold, residual_variance
 from watflex_sim.diagnosis.validate import explained_share
 from watflex_sim.diagnosis.tolerance import fold_within_tolerance
@@ -959,6 +960,23 @@ def test_a_finding_is_told_from_no_effect_by_its_intervals():
     assert not indistinct(None, {"effect": "backlash", "where": "hub", "width": 1e-4, "position": 0.0},
                           {"width": (1e-6, 2e-4), "position": (-1.0, 1.0)})
     assert not indistinct(None, stiffness, {})  # no interval: nothing to judge by
+
+
+def test_a_finding_says_which_interval_reaches_no_effect():
+    """explain.finding: a kept finding one of whose 95 % intervals includes the value at which that part of the effect
+    vanishes says so, by name and value, in 'explanation' and in 'interval_reaches_neutral' (seed 113's one-way laser
+    hub Coulomb friction, 0.0984 / 0 N m: its free side fitted at 0.027 [0, 0.031] N m; a dwell-time stiction's gain
+    [0, 0.488]): a user reads that friction the other way, or the dwell's growth, may be absent. Sides whose interval
+    is clear of it are not named."""
+    one_way = {"effect": "viscous_friction", "where": "hub", "coefficient": 0.4, "coefficient_negative": 0.01}
+    scores = dict.fromkeys(["train_before", "train_after", "held_before", "held_after", "ratio_before", "ratio_after",
+                            "ablated", "held_without"], 1.0)
+    data = types.SimpleNamespace(rig=load_rig("laser_arm"), recordings=[])
+    out = finding(data, one_way, {"coefficient": (0.3, 0.5), "coefficient_negative": (-0.002, 0.03)}, scores, [])
+    assert out["interval_reaches_neutral"] == ["coefficient_negative"]
+    assert "95 % interval reaches coefficient_negative = 0 N m s/rad: the data do not rule that out" in out["explanation"]
+    both = finding(data, one_way, {"coefficient": (0.3, 0.5), "coefficient_negative": (0.005, 0.03)}, scores, [])
+    assert both["interval_reaches_neutral"] == [] and "rule that out" not in both["explanation"]
 
 
 def test_a_finding_validation_cannot_do_without_is_not_dropped_for_its_intervals():

@@ -97,10 +97,27 @@ def physical_extras(data: Data, effect: str, where: str, params: dict, ranges: d
     return {}, {}, {}
 
 
-def explain(effect: str, where: str, params: dict, units: dict) -> str:
+def explain(effect: str, where: str, params: dict, units: dict, open_to_neutral: dict[str, float] | None = None) -> str:
+    """The finding in words, its parameters with units, and each parameter whose 95 % interval reaches the value at
+    which the effect vanishes there (`open_to_neutral`: name -> that value): the data do not rule that out."""
     text = EXPLAIN[effect].format(where=where, **{**{p.name: p.start for p in CATALOGUE[effect][1]}, **params})
     named = [f"{k} {v:.4g} {units.get(k, '')}".rstrip() for k, v in params.items()]
-    return f"{text} ({', '.join(named)})"
+    open_ = [f"{k} = {v:.4g} {units.get(k, '')}".rstrip() for k, v in (open_to_neutral or {}).items()]
+    return f"{text} ({', '.join(named)})" + (
+        f"; the 95 % interval{'s' if len(open_) > 1 else ''} reach{'' if len(open_) > 1 else 'es'} "
+        f"{' and '.join(open_)}: the data do not rule that out" if open_ else "")
+
+
+def open_to_neutral(data: Data, effect: str, where: str, intervals: dict[str, list[float]]) -> dict[str, float]:
+    """Parameters of `effect` at `where` whose 95 % interval includes the value at which the effect vanishes (the
+    catalogue's `neutral` in the data's units: no friction one way, a ratio of 1), with that value."""
+    out = {}
+    for p in CATALOGUE[effect][1]:
+        lo, hi = intervals.get(p.name) or (None, None)
+        value = None if p.neutral is None else p.neutral and p.neutral * scale_of(data, p, where)
+        if value is not None and lo is not None and lo <= value <= hi:
+            out[p.name] = float(value)
+    return out
 
 
 def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list[dict]) -> dict:
@@ -113,6 +130,7 @@ def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list
     intervals = {k: [float(min(lo, params[k])), float(max(hi, params[k]))] for k, (lo, hi) in ranges.items() if k in params}
     extra, extra_units, extra_intervals = physical_extras(data, name, where, params, ranges)
     place = physical_place(data, name, where)
+    reaching = open_to_neutral(data, name, where, intervals)
     evidence = "; ".join(f"{w['channel']} off by {w['score']:.2f} of its spread ({w['noise_ratio']:.1f} x its noise) "
                          f"in {w['recording']} {w['t_start']:.2f}-{w['t_end']:.2f} s ({w['regime']})" for w in mismatch[:3])
     s = scores
@@ -120,7 +138,8 @@ def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list
         "effect": name, "where": place, "direction": direction(name, params),
         "parameters": {**params, **extra}, "units": {**{k: units.get(k, "") for k in params}, **extra_units},
         "intervals": {**intervals, **extra_intervals},
-        "explanation": explain(name, place, {**params, **extra}, {**units, **extra_units}),
+        "explanation": explain(name, place, {**params, **extra}, {**units, **extra_units}, reaching),
+        "interval_reaches_neutral": sorted(reaching),
         "evidence": (f"residual: {evidence}. " if evidence else "")
         + f"With the findings: training NRMSE {s['train_before']:.4f} -> {s['train_after']:.4f}, validation "
           f"{s['held_before']:.4f} -> {s['held_after']:.4f} ({s['ratio_before']:.2f} -> {s['ratio_after']:.2f} x the noise); "
@@ -134,10 +153,8 @@ def indistinct(data: Data, effect: dict, intervals: dict[str, tuple[float, float
     (the catalogue's `neutral`: no friction, a ratio of 1) includes that value: the data cannot tell the finding
     from no effect at all. False for an effect without such a parameter (a backlash, a compliance, a limit) or
     without intervals."""
-    checks = [lo <= (p.neutral and p.neutral * scale_of(data, p, effect["where"])) <= hi
-              for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None
-              for lo, hi in [intervals.get(p.name) or (None, None)] if lo is not None]
-    return bool(checks) and all(checks)
+    named = [p.name for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None and intervals.get(p.name)]
+    return bool(named) and set(named) <= set(open_to_neutral(data, effect["effect"], effect["where"], intervals))
 
 
 def canonical_form(model: Model, ranges: dict[int, dict]) -> tuple[Model, dict[int, dict]]:

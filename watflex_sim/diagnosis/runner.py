@@ -154,13 +154,14 @@ class Runner:
 
     def simulate_seeds(self, model: Model, seeds: list[int | None], finer: float = 1) -> list[list[Recording] | None]:
         """`simulate` once per noise seed (None: noise off), all in one lockstep call; `finer` relative to the fidelity."""
-        return self._simulate_each([(model, seed) for seed in seeds], finer)
+        return self.simulate_runs([(model, seed) for seed in seeds], finer)
 
     def simulate_models(self, models: list[Model], finer: float = 1) -> list[list[Recording] | None]:
         """`simulate` for each model (noise off), all in one lockstep call; `finer` relative to the fidelity."""
-        return self._simulate_each([(model, None) for model in models], finer)
+        return self.simulate_runs([(model, None) for model in models], finer)
 
-    def _simulate_each(self, runs: list[tuple[Model, int | None]], finer: float = 1) -> list[list[Recording] | None]:
+    def simulate_runs(self, runs: list[tuple[Model, int | None]], finer: float = 1) -> list[list[Recording] | None]:
+        """`simulate` for each (model, noise seed), all in one lockstep call; `finer` relative to the fidelity."""
         n = len(self.data.recordings)
         factor = finer * self.fidelity
         sims = self.lockstep(_simulate_some, [(model, i, seed, factor) for model, seed in runs for i in range(n)])

@@ -163,19 +163,20 @@ def realisation_reach(data: Data, runner: Runner, model: Model, per: np.ndarray,
     if len(costs) < 2:
         return
     reference = float(np.mean(costs))
-    for i, effect in enumerate(model.effects):
-        for name, neutral in neutral_values(data, effect).items():
-            if name not in out.get(i, {}):
-                continue
+    sizes = [(i, name, neutral) for i, effect in enumerate(model.effects)
+             for name, neutral in neutral_values(data, effect).items()
+             if name in out.get(i, {}) and not out[i][name][0] <= neutral <= out[i][name][1]]
+    if not sizes:
+        return
+    moved = [Model([{**e, name: neutral} if j == i else e for j, e in enumerate(model.effects)], dict(model.parameters))
+             for i, name, neutral in sizes]
+    every = runner.simulate_runs([(m, seed) for m in moved for seed in REPLICATE_SEEDS])  # one lockstep call
+    for k, (i, name, neutral) in enumerate(sizes):
+        runs = [residual_vector(data, sims, "all") / per
+                for sims in every[k * len(REPLICATE_SEEDS):(k + 1) * len(REPLICATE_SEEDS)] if sims]
+        if runs and min(float(x @ x) for x in runs) <= reference:
             low, high = out[i][name]
-            if low <= neutral <= high:
-                continue
-            moved = Model([{**e, name: neutral} if j == i else e for j, e in enumerate(model.effects)],
-                          dict(model.parameters))
-            runs = [residual_vector(data, sims, "all") / per
-                    for sims in runner.simulate_seeds(moved, list(REPLICATE_SEEDS)) if sims]
-            if runs and min(float(x @ x) for x in runs) <= reference:
-                out[i][name] = (min(low, neutral), max(high, neutral))
+            out[i][name] = (min(low, neutral), max(high, neutral))
 
 
 def widen(out: dict[int, dict], slots: list[Slot], reach: dict[int, tuple[float, float]]) -> None:
