@@ -323,7 +323,7 @@ def test_shortlist_fits_screening_ties_too():
     assert [c.effect for c in shortlist(ranked(0.69, 0.689, 0.688, 0.2))] == ["e0", "e1", "e2"]
     assert [c.effect for c in shortlist(ranked(0.69, 0.5, 0.45, 0.44))] == ["e0", "e1"]
     assert len(shortlist(ranked(0.5, 0.5, 0.5, 0.5, 0.5))) == 4
-    assert shortlist(ranked(0.0, 0.0)) == []
+    assert shortlist(ranked(0.0, 0.0)) == [] and shortlist([]) == []
 
 
 def test_shortlist_does_not_fit_a_runner_up_far_below_the_leader():

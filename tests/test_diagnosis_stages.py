@@ -974,7 +974,7 @@ def test_a_finding_says_which_interval_reaches_no_effect():
     data = types.SimpleNamespace(rig=load_rig("laser_arm"), recordings=[])
     out = finding(data, one_way, {"coefficient": (0.3, 0.5), "coefficient_negative": (-0.002, 0.03)}, scores, [])
     assert out["interval_reaches_neutral"] == ["coefficient_negative"]
-    assert "95 % interval reaches coefficient_negative = 0 N m s/rad: the data do not rule that out" in out["explanation"]
+    assert "interval reaches coefficient_negative = 0 N m s/rad: the data do not rule that out" in out["explanation"]
     both = finding(data, one_way, {"coefficient": (0.3, 0.5), "coefficient_negative": (0.005, 0.03)}, scores, [])
     assert both["interval_reaches_neutral"] == [] and "rule that out" not in both["explanation"]
 

@@ -355,11 +355,13 @@ def shortlist(ranked: list[Candidate], screen_top: int = SCREEN_TOP) -> list[Can
     were fitted, and the compliance was found). A signature is a linear picture and
     stick-slip is not: a laser hub's Coulomb friction in closed loop screened at 21 % against
     Stribeck's 41 %, then fitted to 0.75 x the noise on validation against Stribeck's 1.00 x."""
-    lead = ranked[0].gain if not ranked or ranked[0].checked is None else min(ranked[0].gain, max(ranked[0].checked, 0.0))
+    first = ranked[0] if ranked else None
+    lead = 0.0 if first is None else first.gain if first.checked is None else min(first.gain, max(first.checked, 0.0))
     weak = lambda c: max(c.gain, c.checked or -math.inf) < SCREEN_FLOOR * lead  # noqa: E731
     top = [c for c in ranked[:screen_top] if c.gain > 0 and not weak(c)]
     top += [c for c in ranked[screen_top:SCREEN_MAX] if top and c.gain >= SCREEN_TIE * top[-1].gain and not weak(c)]
-    spare = sorted((c for c in ranked if c not in top and (c.checked or 0) > 0 and not weak(c)), key=lambda c: -c.checked)
+    spare = sorted((c for c in ranked if c not in top and (c.checked or 0) > 0 and not weak(c)),
+                   key=lambda c: -c.checked)
     top = [spare.pop(0) if c.checked is not None and c.checked < 0 and spare else c for c in top]
     checked = [c.checked for c in top if c.checked is not None]
     if spare and checked and spare[0].checked >= SIMULATED_TIE * max(checked):  # the simulation puts it close: fit it too
