@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from ..effects import CATALOGUE, canonical, canonical_moves
 from .data import Data, Model
-from .motion import scale_of
+from .motion import neutral_values
 
 EXPLAIN = {
     "coulomb_friction": "dry friction at {where}: it sticks below {torque_positive:.3g} (positive) / {torque_negative:.3g} (negative) and slides against that level",
@@ -111,13 +111,8 @@ def explain(effect: str, where: str, params: dict, units: dict, open_to_neutral:
 def open_to_neutral(data: Data, effect: str, where: str, intervals: dict[str, list[float]]) -> dict[str, float]:
     """Parameters of `effect` at `where` whose 95 % interval includes the value at which the effect vanishes (the
     catalogue's `neutral` in the data's units: no friction one way, a ratio of 1), with that value."""
-    out = {}
-    for p in CATALOGUE[effect][1]:
-        lo, hi = intervals.get(p.name) or (None, None)
-        value = None if p.neutral is None else p.neutral and p.neutral * scale_of(data, p, where)
-        if value is not None and lo is not None and lo <= value <= hi:
-            out[p.name] = float(value)
-    return out
+    return {name: float(value) for name, value in neutral_values(data, {"effect": effect, "where": where}).items()
+            if intervals.get(name) and intervals[name][0] <= value <= intervals[name][1]}
 
 
 def finding(data: Data, effect: dict, ranges: dict, scores: dict, mismatch: list[dict]) -> dict:

@@ -71,8 +71,8 @@ def scale_of(data: Data, param, where: str) -> float:
 
 def neutral_values(data: Data, effect: dict) -> dict[str, float]:
     """The values at which the effect's parameters that have one vanish (effects.Param.neutral: a friction side's 0,
-    a ratio's 1), in the data's units (`scale_of`)."""
-    return {p.name: p.neutral * scale_of(data, p, effect["where"])
+    a ratio's 1), in the data's units (`scale_of`; a neutral 0 is 0 in any)."""
+    return {p.name: p.neutral and p.neutral * scale_of(data, p, effect["where"])
             for p in CATALOGUE[effect["effect"]][1] if p.neutral is not None}
 
 
