@@ -344,6 +344,32 @@ def test_shortlist_does_not_fit_a_runner_up_far_below_the_leader():
     assert [c.effect for c in shortlist(ranked((0.66, -0.95), (0.05, 0.04)))] == ["e0", "e1"]  # nothing pruned
 
 
+def test_leader_first_defers_only_runners_up_elsewhere_far_below_the_leader():
+    """leader_first(): seed 115, watflex-50ef1468, a command delay screened at 66.3 % (not simulated: a delay is
+    searched in steps), an elbow ripple, dwell-time stiction and Stribeck friction at 34.1 / 34.9 / 30.8 % (simulated
+    32.9 / 34.4 / 34.7 %): all below LEADER_FIRST (0.6) x the leader, so deferred. A runner-up at the leader's place
+    (a rival law), the concealed candidate, one simulated above 0.6 x, and the runners-up of a leader its simulation
+    refuted (lead gain 0) are fitted first."""
+    from watflex_sim.diagnosis import Candidate
+    from watflex_sim.diagnosis.screening import LEADER_FIRST, leader_first
+
+    delay = Candidate("delay", "command", {}, {}, {}, gain=0.663)
+    ripple = Candidate("position_dependent_friction", "elbow", {}, {}, {}, gain=0.341, checked=0.329)
+    dwell = Candidate("dwell_time_stiction", "elbow", {}, {}, {}, gain=0.349, checked=0.344)
+    stribeck = Candidate("stribeck_friction", "elbow", {}, {}, {}, gain=0.308, checked=0.347)
+    assert max(0.349, 0.347) < LEADER_FIRST * 0.663 < 0.41
+    first, deferred = leader_first([delay, dwell, ripple, stribeck])
+    assert first == [delay] and deferred == [dwell, ripple, stribeck]
+    near = Candidate("backlash", "hub", {}, {}, {}, gain=0.3, checked=0.41)  # simulated at 0.62 x the delay
+    assert leader_first([delay, near, dwell]) == ([delay, near], [dwell])
+    assert leader_first([delay, dwell], hidden=dwell) == ([delay, dwell], [])  # what the refit took up
+    coulomb = Candidate("coulomb_friction", "elbow", {}, {}, {}, gain=0.05, checked=0.01)  # at the leader's place
+    low = Candidate("backlash", "shoulder", {}, {}, {}, gain=0.05, checked=0.01)
+    assert leader_first([stribeck, coulomb, low]) == ([stribeck, coulomb], [low])
+    refuted = Candidate("backlash", "hub", {}, {}, {}, gain=0.9, checked=-0.3)
+    assert leader_first([refuted, dwell]) == ([refuted, dwell], []) and leader_first([]) == ([], [])
+
+
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).

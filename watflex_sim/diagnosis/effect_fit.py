@@ -97,15 +97,17 @@ def restep(evaluate, cand: Candidate, free: list[Slot], model: Model, cost: floa
 
 
 def fit_candidates(data: Data, runner: Runner, base: Model, cands: list[Candidate], rig_columns: np.ndarray, iters: int,
-                   per: np.ndarray) -> list[dict]:
+                   per: np.ndarray, others: list[Candidate] | None = None) -> list[dict]:
     """`fit_candidate` for every candidate at once, in the order given, each with its fitted model's simulations
     ('sims'). Each fit runs in a thread of its own and their simulations go to the workers together (runner.run_gathered:
     the k-th call of every fit in one lockstep call): one fit per worker left a worker idle once its fit ended or
     when the fits outnumbered the workers (3 on 2). The same simulations as one fit per worker, so the same results
-    to the digit. A candidate's second fit ('also': a ripple from the scan beside the others) follows its first."""
+    to the digit. A candidate's second fit ('also': a ripple from the scan beside the others, `others`: the round's
+    shortlist, by default `cands`) follows its first."""
     rig_columns = rig_columns / per[:, None]  # in noise units, as the fits' residuals
     results = run_gathered(in_units(evaluator(runner), per), [
-        lambda evaluate, cand=cand: fit_candidate(data, evaluate, base, cand, rig_columns, iters, cands) for cand in cands])
+        lambda evaluate, cand=cand: fit_candidate(data, evaluate, base, cand, rig_columns, iters, others or cands)
+        for cand in cands])
     results = [fit for r in results for fit in [r, *r.pop("also", [])]]  # a ripple's fit from the scan beside the others
     fitted = [r for r in results if "model" in r]
     for result, sims in zip(fitted, runner.simulate_models([r["model"] for r in fitted])):

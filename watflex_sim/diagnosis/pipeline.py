@@ -41,7 +41,8 @@ from .refit import (FLOORS, calibrate_noise, fine_for_round, keep_fidelity, rais
 from .rescreen import RESCREEN, rescreen
 from .runner import Runner, evaluator, in_units
 from .scores import fit_scores, noise_nrmse, noise_table, step
-from .screening import SCREEN_TOP, candidates, concealed, make_candidate, screen, shortlist, signatures, with_findings
+from .screening import (LEADER_FIRST, SCREEN_TOP, candidates, concealed, leader_first, make_candidate, screen, shortlist,
+                        signatures, with_findings)
 from .settle import settle
 from .tolerance import at_bounds, beyond_tolerance
 from .validate import (NOISE_MARGIN, curved_channels, earns_place, explained_share, far_gain, gains, near_place, rival,
@@ -69,6 +70,14 @@ class Stages:
         self.kind, self.t0, self.jobs0 = kind, now, self.runner.jobs
         if kind != "done":
             self.say(message)
+
+
+def settling_fit(data: Data, results: list[dict]) -> dict | None:
+    """The first of `fit_candidates`' results that fits training and validation to within the noise on every
+    channel (validate.within_noise), or None: the round's leader fitted, its deferred runners-up can at most tie it
+    (screening.leader_first)."""
+    return next((r for r in results if "sims" in r and within_noise(
+        fit_scores(data, r["sims"], "train"), fit_scores(data, r["sims"], "held_out"))), None)
 
 
 def diagnose(recordings: list[Recording], names: list[str], workers: int = 2, max_effects: int = 2,
@@ -160,10 +169,24 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
             top += [hidden] if hidden else []
         if not top:
             break
-        say("candidate fits", f"round {round_}: fitting the {len(top)} whose signatures match the residual best: "
-            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in top if c is not hidden)
-            + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else ""))
-        results = fit_candidates(data, runner, current, top, rig_columns, FIT_ITERATIONS, per)
+        first, deferred = (top, []) if beyond or (local and not current.effects) else leader_first(top, hidden)
+        say("candidate fits", f"round {round_}: fitting the {len(first)} whose signatures match the residual best: "
+            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in first if c is not hidden)
+            + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else "")
+            + ("; then, unless one fits to within the noise, " + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)"
+                                                                          for c in deferred) if deferred else ""))
+        results = fit_candidates(data, runner, current, first, rig_columns, FIT_ITERATIONS, per, others=top)
+        done = settling_fit(data, results) if deferred else None
+        if done is not None:
+            say("candidate fits", f"round {round_}: {done['effect']} at {done['where']} fits to within the noise; "
+                + ", ".join(f"{c.effect}@{c.where}" for c in deferred) + f", screened below {LEADER_FIRST:g} x the "
+                "leader, not fitted")
+            skipped = {(c.effect, c.where) for c in deferred}
+            for entry in screened_report[-1]:
+                if (entry["effect"], entry["where"]) in skipped:
+                    entry["fitted"] = False
+        elif deferred:
+            results += fit_candidates(data, runner, current, deferred, rig_columns, FIT_ITERATIONS, per, others=top)
         rejected += [{"effect": r["effect"], "where": r["where"], "error": r["error"]} for r in results if "error" in r]
         fitted = [scored(data, r, r["sims"]) for r in results if "error" not in r]
         if not fitted:
