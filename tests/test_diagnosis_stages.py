@@ -2558,6 +2558,35 @@ def test_a_round_whose_candidate_does_not_stand_the_coarse_model_is_fitted_as_fi
         assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(now, runner.simulate(Model())) for c in a.channels)
 
 
+def _refits_scored_by(monkeypatch, ratio_of):
+    """refine's refits stood in for: levenberg keeps its start, and a model's training and validation noise ratios are
+    both `ratio_of(model)` (the simulations' stand-in); returns a Runner class for swap_earlier."""
+    from watflex_sim.diagnosis import refine
+
+    n_params = {"stribeck_friction": 3, "coulomb_friction": 2, "position_dependent_friction": 4, "actuator_gain": 1,
+                "actuator_offset": 1}
+
+    class Runner:
+        def simulate(self, model):
+            return ratio_of(model)
+
+    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
+    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
+    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: [])
+    monkeypatch.setattr(refine, "rig_slots", lambda data: [])
+    monkeypatch.setattr(refine, "parameter_count", lambda data, effect: n_params[effect["effect"]])
+    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
+    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
+                                                                      "held_out": {"noise_ratio": sims}})
+    return Runner
+
+
+def _fitted(effect, held, score, where="hub", **values):
+    """A round's fitted result as swap_earlier reads it."""
+    return {"effect": effect, "where": where, "model": Model([{"effect": effect, "where": where, **values}]),
+            "held_out": {"noise_ratio": held}, "score": score}
+
+
 def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are_in(monkeypatch):
     """swap_earlier(): seed 65, laser_arm-d6ea25d4 (hub Coulomb friction beside a voltage gain x1.132): with the
     gain missing, a Stribeck friction fitted validation best in round 1 (1.83 x the noise, Coulomb 2.19 x) and was
@@ -2570,25 +2599,8 @@ def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are
 
     ratio = {("actuator_gain",): 5.5, ("actuator_gain", "stribeck_friction"): 0.77,
              ("actuator_gain", "coulomb_friction"): 0.75, ("actuator_gain", "position_dependent_friction"): 0.90}
-    n_params = {"stribeck_friction": 3, "coulomb_friction": 2, "position_dependent_friction": 4, "actuator_gain": 1}
-
-    class Runner:
-        def simulate(self, model):
-            return ratio[tuple(sorted(e["effect"] for e in model.effects))]  # stands for the simulations
-
-    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
-    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
-    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: [])
-    monkeypatch.setattr(refine, "rig_slots", lambda data: [])
-    monkeypatch.setattr(refine, "parameter_count", lambda data, effect: n_params[effect["effect"]])
-    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
-    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
-                                                                      "held_out": {"noise_ratio": sims}})
-
-    def fitted(effect, held, score):
-        return {"effect": effect, "where": "hub", "model": Model([{"effect": effect, "where": "hub"}]),
-                "held_out": {"noise_ratio": held}, "score": score}
-
+    Runner = _refits_scored_by(monkeypatch, lambda model: ratio[tuple(sorted(e["effect"] for e in model.effects))])
+    fitted = _fitted
     gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 1.118}
     current = refine.scored(None, {"model": Model([{"effect": "stribeck_friction", "where": "hub"}, gain])}, 0.77)
     round_1 = (fitted("stribeck_friction", 1.83, 1.187), [fitted("coulomb_friction", 2.19, 1.0),
@@ -2603,6 +2615,43 @@ def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are
     ratio[("actuator_gain", "coulomb_friction")] = 0.95
     out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
     assert out is current and [a["effect"] for a, _ in tried] == ["position_dependent_friction", "coulomb_friction"]
+
+
+def test_a_ripple_runner_up_is_fitted_anew_beside_the_later_findings(monkeypatch):
+    """swap_earlier(anew): seed 116, laser_arm-3cd2e177, a hub ripple (0.083 N m over 0.039 rad, the hub moving 2 mrad)
+    beside a voltage gain x0.735. With the gain missing, round 1 kept a voltage offset (9.91 x the noise) over the
+    ripple (9.95 x), fitted at 0.010 rad with a spring of -36 N m/rad; refit from there beside the gain it reached
+    2.95 x on validation against the offset's 1.43 x (swap_earlier's tries printed); the true ripple refit in its
+    place 0.77 x. Stand-ins: the gain alone 16 x; a ripple scores by its period. A ripple runner-up is also fitted anew
+    (`anew`, once a place though the round fitted it twice) and refit from there; the better is taken: score
+    2 (16 - 0.77) / 16 - 0.08 = 1.824 against the offset's 2 (16 - 1.43) / 16 - 0.02 = 1.801. Without `anew`, not."""
+    from watflex_sim.diagnosis import refine
+
+    def ratio_of(model):
+        effects = {e["effect"]: e for e in model.effects}
+        if "position_dependent_friction" in effects:
+            return 0.77 if effects["position_dependent_friction"]["period"] == 0.039 else 2.95
+        return 1.43 if "actuator_offset" in effects else 16.0
+
+    Runner = _refits_scored_by(monkeypatch, ratio_of)
+    gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 0.735}
+    offset = {"effect": "actuator_offset", "where": "voltage_cmd", "offset": 0.0215}
+    current = refine.scored(None, {"model": Model([offset, gain])}, 1.43)
+    ripples = [_fitted("position_dependent_friction", 9.95, 0.92, period=0.0104, amplitude=0.37),
+               _fitted("position_dependent_friction", 9.69, 0.81, period=0.001, amplitude=0.28)]
+    round_1 = (_fitted("actuator_offset", 9.91, 0.93, where="voltage_cmd", offset=0.029), ripples)
+    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    assert out is current and len(tried) == 2  # from round 1's fits: 2.95 x, not taken
+    calls = []
+
+    def anew(base, effect, where):
+        calls.append((effect, where, tuple(e["effect"] for e in base.effects)))
+        return Model(base.effects + [{"effect": effect, "where": where, "period": 0.039, "amplitude": -0.083}])
+
+    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3, anew)
+    assert [e["effect"] for e in out["model"].effects] == ["actuator_gain", "position_dependent_friction"]
+    assert out["model"].effects[-1]["period"] == 0.039 and out["score"] == pytest.approx(2 * (16 - 0.77) / 16 - 0.08)
+    assert calls == [("position_dependent_friction", "hub", ("actuator_gain",))]
 
 
 def test_a_hunting_loop_raises_the_noise_floor_it_is_judged_by():

@@ -113,6 +113,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
     limited = None  # max_effects where the search stopped at it (validate.verdict_reason)
     round_models = {}  # each round's chosen model, fitted on the training blocks, by its effects' places
+    shortlisted = {}  # (effect, place) -> its candidate in the latest round that fitted it
     local, local_tried = [], False  # windows far above their local null (locate.local_excess) where the refit model is
     # within the noise on the whole: a round of their own; they then judge its findings to the end
 
@@ -244,6 +245,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         alternatives += [alternative_entry(data, r, best, n) for r in fitted
                          if places(r) != places(best) and rival(r, best, later, data.absorbable)]
         rounds.append((best, [r for r in fitted if (r["effect"], r["where"]) != (best["effect"], best["where"])]))
+        shortlisted |= {(c.effect, c.where): c for c in top}  # a runner-up's candidate, fitted anew in the swap
         say("verdict", f"round {round_}: found {best['effect']} at {best['where']}: validation "
             f"{held['noise_ratio']:.2f} -> {best['held_out']['noise_ratio']:.2f} x the noise"
             + (f" (far from the noise: {100 * best['train_gain']:.1f} % better on training, {100 * best['held_gain']:.1f} % "
@@ -266,7 +268,15 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         limited = max_effects
     if len(rounds) > 1:  # an earlier round's choice, with the later findings in (refine.swap_earlier)
         say("swap", "refitting each earlier finding's runners-up in its place beside the later findings")
-        now, tried = swap_earlier(data, runner, scored(data, {"model": current}, sims), rounds[:-1], PAIR_MARGIN)
+        def anew(base: Model, effect: str, where: str) -> Model | None:
+            """The round's candidate fitted anew on `base` (a ripple's period scanned again; of its fits the one that
+            leaves the least), or None."""
+            if (effect, where) not in shortlisted:
+                return None
+            out = fit_candidates(data, runner, base, [shortlisted[effect, where]], rig_columns, FIT_ITERATIONS, per)
+            return min((r for r in out if "model" in r), key=lambda r: r["cost"], default={}).get("model")
+
+        now, tried = swap_earlier(data, runner, scored(data, {"model": current}, sims), rounds[:-1], PAIR_MARGIN, anew)
         if now["model"] is not current:
             current, sims = now["model"], now["sims"]
             steps.append(step(f"{now['effect']} at {now['where']} in an earlier finding's place", data, sims, current))
