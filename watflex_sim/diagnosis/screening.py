@@ -391,7 +391,7 @@ def leader_first(top: list[Candidate], hidden: Candidate | None = None) -> tuple
     the round within the noise (pipeline): a runner-up at another place than the leader's whose screened and simulated
     gains are both below LEADER_FIRST x the leader's (`lead_gain`). Where the leader fits the data to within the noise
     on every channel such a runner-up can at most tie it, and a linear picture that put it that far behind has not
-    been seen to misjudge it so (seeds 114-115: every round's winner screened at 0.95-1.44 x the leader, none of 17
+    been seen to misjudge it so (seeds 114-115: every round's winner screened at 0.95-1.44 x the leader, none of 20
     runners-up below 0.6 x won or was listed as an alternative; seed 44's winner simulated first at 1.1 x, seed
     48's at 0.81 x). Runners-up at the leader's place (a rival or simpler law: stick-slip is where the picture
     misjudges by 2 x, seed 48's Coulomb friction screened at 0.51 x a Stribeck's and fitted better) and `hidden`
