@@ -2600,12 +2600,11 @@ def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are
     ratio = {("actuator_gain",): 5.5, ("actuator_gain", "stribeck_friction"): 0.77,
              ("actuator_gain", "coulomb_friction"): 0.75, ("actuator_gain", "position_dependent_friction"): 0.90}
     Runner = _refits_scored_by(monkeypatch, lambda model: ratio[tuple(sorted(e["effect"] for e in model.effects))])
-    fitted = _fitted
     gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 1.118}
     current = refine.scored(None, {"model": Model([{"effect": "stribeck_friction", "where": "hub"}, gain])}, 0.77)
-    round_1 = (fitted("stribeck_friction", 1.83, 1.187), [fitted("coulomb_friction", 2.19, 1.0),
-                                                          fitted("position_dependent_friction", 2.26, 1.18),
-                                                          fitted("viscous_friction", 3.0, 0.9)])  # beyond 1.5 x: not tried
+    round_1 = (_fitted("stribeck_friction", 1.83, 1.187), [_fitted("coulomb_friction", 2.19, 1.0),
+                                                           _fitted("position_dependent_friction", 2.26, 1.18),
+                                                           _fitted("viscous_friction", 3.0, 0.9)])  # 3.0 > 1.5 x 1.83
     out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
     assert [e["effect"] for e in out["model"].effects] == ["actuator_gain", "coulomb_friction"]
     assert out["score"] == pytest.approx(2 * (5.5 - 0.75) / 5.5 - 0.04)

@@ -171,11 +171,11 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         if not top:
             break
         first, deferred = (top, []) if beyond or (local and not current.effects) else leader_first(top, hidden)
+        named = lambda cands: ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in cands)  # noqa: E731
         say("candidate fits", f"round {round_}: fitting the {len(first)} whose signatures match the residual best: "
-            + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)" for c in first if c is not hidden)
+            + named(c for c in first if c is not hidden)
             + (f", and {hidden.effect}@{hidden.where}, first against the datasheet model's residual" if hidden else "")
-            + ("; then, unless one fits to within the noise, " + ", ".join(f"{c.effect}@{c.where} ({100 * c.gain:.0f} %)"
-                                                                          for c in deferred) if deferred else ""))
+            + (f"; then, unless one fits to within the noise, {named(deferred)}" if deferred else ""))
         results = fit_candidates(data, runner, current, first, rig_columns, FIT_ITERATIONS, per, others=top)
         done = settling_fit(data, results) if deferred else None
         if done is not None:

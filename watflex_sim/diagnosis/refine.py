@@ -243,7 +243,8 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
             continue
         i = places.index((winner["effect"], winner["where"]))
         rest = [e for j, e in enumerate(current["model"].effects) if j != i]  # the later findings (and any other)
-        baseline = scores_without(data, runner, Model(rest, dict(current["model"].parameters)))
+        base = Model(rest, dict(current["model"].parameters))  # the current model without the winner
+        baseline = scores_without(data, runner, base)
         if baseline is None:
             continue
         chosen = gains({**current, "effect": winner["effect"], "where": winner["where"],
@@ -252,7 +253,6 @@ def swap_earlier(data: Data, runner: Runner, current: dict, rounds: list[tuple[d
                   and (r["effect"], r["where"]) not in places
                   and r["held_out"]["noise_ratio"] <= SWAP_WITHIN * winner["held_out"]["noise_ratio"]]
         for other in sorted(others, key=lambda r: -r["score"])[:SWAP_TRIES]:
-            base = Model(rest, dict(current["model"].parameters))
             starts = [Model(rest + [dict(other["model"].effects[-1])], dict(base.parameters))]
             key = (other["effect"], other["where"], repr(rest))
             if anew is not None and periodic_name(other["model"].effects[-1]) and key not in fresh:
