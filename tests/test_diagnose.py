@@ -370,6 +370,31 @@ def test_leader_first_defers_only_runners_up_elsewhere_far_below_the_leader():
     assert leader_first([refuted, dwell]) == ([refuted, dwell], []) and leader_first([]) == ([], [])
 
 
+def test_shortlist_adds_a_one_parameter_candidate_at_another_place():
+    """shortlist() / screening.elsewhere: seed 116, watflex-e9576ce5, round 2 (an elbow ripple found; an elbow torque
+    gain x0.759 missing): viscous, Coulomb and Stribeck friction at the elbow screened / simulated at 60 / 49, 56 / 50
+    and 41 / 51 %, the command's current limit at 40 % but refuted by its simulation (-371 %), the gain at 36 / 28 %:
+    the frictions filled the list and the gain was never fitted. The best one-parameter candidate at another place,
+    screened and simulated at SCREEN_FLOOR of the leader at least, is listed too; not one refuted, not a ripple (a
+    scan), and one at most."""
+    from watflex_sim.diagnosis import Candidate, Slot, shortlist
+
+    def cand(effect, where, n, gain, checked):
+        slots = {f"p{i}": Slot(("effect", -1, f"p{i}"), 0.0, 1.0) for i in range(n)}
+        return Candidate(effect, where, {}, slots, {}, gain=gain, checked=checked)
+
+    ranked = [cand("viscous_friction", "elbow", 2, 0.5977, 0.4888), cand("coulomb_friction", "elbow", 2, 0.557, 0.503),
+              cand("stribeck_friction", "elbow", 3, 0.4096, 0.5057),
+              cand("current_saturation", "elbow_torque_cmd", 1, 0.4019, -3.7052),
+              cand("actuator_gain", "elbow_torque_cmd", 1, 0.3646, 0.2838),
+              cand("bearing_friction", "end_effector_bearing", 1, 0.1869, 0.1572)]
+    assert [c.effect for c in shortlist(ranked)] == ["viscous_friction", "coulomb_friction", "stribeck_friction",
+                                                     "actuator_gain"]
+    ripple = Candidate("position_dependent_friction", "shoulder", {}, {"amplitude": Slot(("effect", -1, "a"), 0.0, 1.0)},
+                       {}, gain=0.45, checked=0.45, periodic="period")
+    assert [c.effect for c in shortlist([*ranked[:3], ripple])][3:] == []  # a ripple's scan is no cheap fit
+    assert [c.effect for c in shortlist([ranked[0], cand("sensor_gain", "x", 1, 0.04, 0.04)])] == ["viscous_friction"]
+
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).
@@ -531,7 +556,7 @@ def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
 
     stribeck, position = cand("stribeck", "hub", 3, 0.41), cand("position", "hub", 4, 0.36)
     coulomb, viscous = cand("coulomb", "hub", 2, 0.21), cand("viscous", "hub", 2, 0.20)
-    elsewhere = cand("offset", "tip", 1, 0.30)
+    elsewhere = cand("offset", "tip", 2, 0.30)  # two parameters: not screening.elsewhere's (one-parameter) pick
     names = [c.effect for c in shortlist([stribeck, position, elsewhere, coulomb, viscous])]
     assert names == ["stribeck", "position", "coulomb"]
     assert [c.effect for c in shortlist([stribeck, position, cand("coulomb", "hub", 2, 0.039)])] == ["stribeck", "position"]

@@ -1699,6 +1699,24 @@ def test_a_ripple_with_a_negative_amplitude_is_reported_in_the_one_form():
     assert canonical_form(Model([quarter]), {0: {"phase": (-1.7, -1.5)}})[1][0]["phase"] == pytest.approx((-1.7 + math.pi, -1.5 + math.pi))
 
 
+def test_a_ripple_phase_is_fitted_across_pi():
+    """fitting.effect_slots_of / effects.canonical: a phase is an angle (effects.Param.cyclic), its slot a turn centred
+    on its value, so a fit that wants to cross -pi is not held at a wall there, and the report wraps it back into
+    (-pi, pi]. Seed 116, watflex-e9576ce5: an elbow ripple's phase (truth 2.654 rad) was held at -pi, the lower bound
+    of [-pi, pi], and its amplitude and period took up the misfit (2.77 N m over 1.197 rad for 1.8 over 1.233)."""
+    from watflex_sim.diagnosis.fitting import effect_slots_of, levenberg
+    from watflex_sim.effects import canonical
+
+    effect = {"effect": "position_dependent_friction", "where": "elbow", "phase": -3.0}
+    slot, = effect_slots_of(None, Model([effect]))  # a phase has no scale: no data needed
+    assert (slot.low, slot.high) == pytest.approx((-3.0 - math.pi, -3.0 + math.pi))
+    x = np.linspace(0.0, 2 * math.pi, 200)
+    evaluate = lambda models: [np.sin(x + m.effects[0]["phase"]) - np.sin(x + 2.654) for m in models]  # noqa: E731
+    model, _, _ = levenberg(evaluate, Model([effect]), [slot], [-3.0], iters=20)
+    assert model.effects[0]["phase"] < -math.pi  # past the old wall
+    assert canonical(model.effects[0])["phase"] == pytest.approx(2.654, abs=1e-3)
+    assert canonical({**effect, "amplitude": -0.5, "phase": 3.0})["phase"] == pytest.approx(3.0 - math.pi)
+
 def _ripple_slots(motion: float) -> dict:
     """A position-dependent friction's slots for the ripple stand-ins below, the period's in a motion range `motion` (rad)
     as the catalogue scales it (0.2-200 ranges)."""

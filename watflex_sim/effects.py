@@ -62,6 +62,8 @@ class Param:
     quantum: float = 0.0  # it acts in whole steps of this (a delay in control periods): fitted by trying steps
     periodic: bool = False  # the period of `amplitude` sin(2 pi x / period + `phase`) in the same effect: fitted from a
     # scan of periods (the residual is far from convex in it)
+    cyclic: bool = False  # an angle (a ripple's phase; low..high one turn): fitted within half a turn either side of
+    # its value, so no wall holds a fit that wants to cross +-pi, and reported within (low, high] (canonical)
     variants: tuple[float, ...] = ()  # a shape parameter (no neutral) the screening also probes the effect's neutral
     # parameters at (at each of their levels), as these multiples of its start: the signature changes with it beyond
     # what a linear picture follows (a dwell's time constant; a Stribeck velocity: seed 107, a one-way shoulder
@@ -214,11 +216,20 @@ def position_dependent_friction(patch, where, amplitude, period=2 * math.pi, pha
 
 def canonical_moves(effect: dict) -> dict[str, tuple[float, float]]:
     """Per parameter, (sign, shift) taking `effect` to the one form reported where a catalogue parameterisation has
-    two (value -> sign * value + shift; empty where it is in that form): a position-dependent friction's
-    a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), the phase kept within (-pi, pi]."""
-    if effect.get("effect") != "position_dependent_friction" or effect.get("amplitude", 0.0) >= 0:
+    more (value -> sign * value + shift; empty where it is in that form): a position-dependent friction's
+    a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), and a phase is reported within (-pi, pi] (a fit may
+    carry it past, Param.cyclic)."""
+    if effect.get("effect") != "position_dependent_friction":
         return {}
-    return {"amplitude": (-1.0, 0.0), "phase": (1.0, math.pi if effect.get("phase", 0.0) <= 0 else -math.pi)}
+    moves, phase = {}, effect.get("phase", 0.0)
+    if effect.get("amplitude", 0.0) < 0:
+        moves["amplitude"] = (-1.0, 0.0)
+        phase += math.pi if phase <= 0 else -math.pi
+    if not -math.pi < phase <= math.pi:
+        phase = math.pi - (math.pi - phase) % (2 * math.pi)
+    if phase != effect.get("phase", 0.0):
+        moves["phase"] = (1.0, phase - effect.get("phase", 0.0))
+    return moves
 
 
 def canonical(effect: dict) -> dict:
@@ -341,7 +352,7 @@ CATALOGUE: dict[str, tuple[Callable, tuple[Param, ...], str]] = {
     "viscous_friction": (viscous_friction, (P("coefficient", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0), P("coefficient_negative", "N m s/rad", -0.5, 2.0, 0.05, "effort/speed", 0.0)), "joint"),
     "presliding": (presliding, (P("sigma0", "N m/rad", 1e2, 1e6, 1e4, log=True), P("sigma1", "N m s/rad", 0.1, 100.0, 10.0, log=True)), "joint"),
     "dwell_time_stiction": (dwell_time_stiction, (P("gain", "-", 0.0, 3.0, 0.5, neutral=0.0), P("time_constant", "s", 0.05, 30.0, 2.0, log=True, variants=(0.2, 5.0))), "joint"),
-    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.2, 200.0, 3.0, "motion", log=True, periodic=True), P("phase", "rad", -math.pi, math.pi, 0.0), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
+    "position_dependent_friction": (position_dependent_friction, (P("amplitude", "N m", -0.5, 0.5, 0.05, "effort", 0.0), P("period", "rad", 0.2, 200.0, 3.0, "motion", log=True, periodic=True), P("phase", "rad", -math.pi, math.pi, 0.0, cyclic=True), P("spring", "N m/rad", -50.0, 50.0, 0.0, neutral=0.0)), "joint"),
     "backlash": (backlash, (P("width", "rad", 1e-5, 0.5, 0.15, "motion", log=True), P("position", "-", -1.0, 1.0, 0.0)), "joint"),
     "joint_compliance": (joint_compliance, (P("stiffness", "N m/rad", 10.0, 3e4, 1e4, log=True),), "joint"),
     "payload": (payload, (P("mass", "kg", -2.0, 10.0, 0.2, neutral=0.0),), "tip"),

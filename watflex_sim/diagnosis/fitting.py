@@ -104,14 +104,16 @@ def rig_slots(data: Data) -> list[Slot]:
 
 
 def effect_slots_of(data: Data, model: Model) -> list[Slot]:
-    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data), the
-    value clamped inside them."""
+    """Slots of every parameter of the model's effects (catalogue bounds scaled to the data, the bounds widened to
+    take the value; a cyclic one's a turn centred on its value)."""
     slots = []
     for i, effect in enumerate(model.effects):
         for p in CATALOGUE[effect["effect"]][1]:
             if p.name in effect and not p.quantum:  # a quantised one keeps the step it was found at
                 size = scale_of(data, p, effect["where"])
                 low, high = min(p.low * size, effect[p.name]), max(p.high * size, effect[p.name])
+                if p.cyclic:  # one turn centred on its value: no wall at +-pi (seed 116, watflex-e9576ce5)
+                    low, high = effect[p.name] - (p.high - p.low) / 2, effect[p.name] + (p.high - p.low) / 2
                 slots.append(Slot(("effect", i, p.name), low, high, p.log))
     return slots
 
