@@ -390,8 +390,8 @@ def test_shortlist_adds_a_one_parameter_candidate_at_another_place():
               cand("bearing_friction", "end_effector_bearing", 1, 0.1869, 0.1572)]
     assert [c.effect for c in shortlist(ranked)] == ["viscous_friction", "coulomb_friction", "stribeck_friction",
                                                      "actuator_gain"]
-    ripple = Candidate("position_dependent_friction", "shoulder", {}, {"amplitude": Slot(("effect", -1, "a"), 0.0, 1.0)},
-                       {}, gain=0.45, checked=0.45, periodic="period")
+    ripple = Candidate("position_dependent_friction", "shoulder", {},
+                       {"amplitude": Slot(("effect", -1, "a"), 0.0, 1.0)}, {}, gain=0.45, checked=0.45, periodic="period")
     assert [c.effect for c in shortlist([*ranked[:3], ripple])][3:] == []  # a ripple's scan is no cheap fit
     assert [c.effect for c in shortlist([ranked[0], cand("sensor_gain", "x", 1, 0.04, 0.04)])] == ["viscous_friction"]
 
