@@ -394,6 +394,9 @@ def test_shortlist_adds_a_one_parameter_candidate_at_another_place():
                        {"amplitude": Slot(("effect", -1, "a"), 0.0, 1.0)}, {}, gain=0.45, checked=0.45, periodic="period")
     assert [c.effect for c in shortlist([*ranked[:3], ripple])][3:] == []  # a ripple's scan is no cheap fit
     assert [c.effect for c in shortlist([ranked[0], cand("sensor_gain", "x", 1, 0.04, 0.04)])] == ["viscous_friction"]
+    refuted = cand("delay", "y", 1, 0.2, -0.2)  # beside a leader its simulation refuted too (lead gain 0)
+    pair = [cand("backlash", "x", 2, 0.5, -0.1), cand("offset", "x", 2, 0.4, 0.3)]
+    assert [c.effect for c in shortlist([*pair, refuted])] == ["backlash", "offset"]
 
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the

@@ -417,7 +417,7 @@ def elsewhere(ranked: list[Candidate], listed: list[Candidate], lead: float) -> 
     scan; below LEADER_FIRST of the leader it waits until the round's first fits leave the noise (leader_first)."""
     places = {c.where for c in listed}
     return [c for c in ranked if c not in listed and c.where not in places and len(c.slots) == 1 and not c.periodic
-            and not c.shape and c.gain > 0 and lead_gain(c) >= SCREEN_FLOOR * lead][:1]
+            and not c.shape and lead_gain(c) > 0 and lead_gain(c) >= SCREEN_FLOOR * lead][:1]
 
 
 def rival_law(ranked: list[Candidate], listed: list[Candidate]) -> list[Candidate]:
