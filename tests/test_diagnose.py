@@ -398,6 +398,7 @@ def test_shortlist_adds_a_one_parameter_candidate_at_another_place():
     pair = [cand("backlash", "x", 2, 0.5, -0.1), cand("offset", "x", 2, 0.4, 0.3)]
     assert [c.effect for c in shortlist([*pair, refuted])] == ["backlash", "offset"]
 
+
 def test_rescreen_checks_a_signature_by_simulating_its_estimate():
     """rescreen(): each candidate simulated at its linear estimate and half-way to it; `checked` is the
     larger share of the training cost removed (no rig parameters here, so the plain sum of squares).

@@ -1717,6 +1717,7 @@ def test_a_ripple_phase_is_fitted_across_pi():
     assert canonical(model.effects[0])["phase"] == pytest.approx(2.654, abs=1e-3)
     assert canonical({**effect, "amplitude": -0.5, "phase": 3.0})["phase"] == pytest.approx(3.0 - math.pi)
 
+
 def _ripple_slots(motion: float) -> dict:
     """A position-dependent friction's slots for the ripple stand-ins below, the period's in a motion range `motion` (rad)
     as the catalogue scales it (0.2-200 ranges)."""

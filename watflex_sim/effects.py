@@ -217,18 +217,19 @@ def position_dependent_friction(patch, where, amplitude, period=2 * math.pi, pha
 def canonical_moves(effect: dict) -> dict[str, tuple[float, float]]:
     """Per parameter, (sign, shift) taking `effect` to the one form reported where a catalogue parameterisation has
     more (value -> sign * value + shift; empty where it is in that form): a position-dependent friction's
-    a sin(x + phase) with a < 0 is |a| sin(x + phase +- pi), and a phase is reported within (-pi, pi] (a fit may
-    carry it past, Param.cyclic)."""
-    if effect.get("effect") != "position_dependent_friction":
-        return {}
-    moves, phase = {}, effect.get("phase", 0.0)
-    if effect.get("amplitude", 0.0) < 0:
+    a sin(x + phase) with a < 0 is |a| sin(x + phase + pi), and a cyclic parameter (a phase) is reported within its
+    catalogue turn (low, high] (a fit may carry it past, Param.cyclic)."""
+    moves, turned = {}, dict(effect)
+    if effect.get("effect") == "position_dependent_friction" and effect.get("amplitude", 0.0) < 0:
         moves["amplitude"] = (-1.0, 0.0)
-        phase += math.pi if phase <= 0 else -math.pi
-    if not -math.pi < phase <= math.pi:
-        phase = math.pi - (math.pi - phase) % (2 * math.pi)
-    if phase != effect.get("phase", 0.0):
-        moves["phase"] = (1.0, phase - effect.get("phase", 0.0))
+        turned["phase"] = effect.get("phase", 0.0) + math.pi
+    for p in CATALOGUE[effect["effect"]][1] if effect.get("effect") in CATALOGUE else ():
+        if p.cyclic and p.name in turned:
+            value = turned[p.name]
+            if not p.low < value <= p.high:
+                value = p.high - (p.high - value) % (p.high - p.low)
+            if value != effect.get(p.name, 0.0):
+                moves[p.name] = (1.0, value - effect.get(p.name, 0.0))
     return moves
 
 
