@@ -351,7 +351,7 @@ def test_leader_first_defers_only_runners_up_elsewhere_far_below_the_leader():
     (a rival law), the concealed candidate, one simulated above 0.6 x, and the runners-up of a leader its simulation
     refuted (lead gain 0) are fitted first."""
     from watflex_sim.diagnosis import Candidate
-    from watflex_sim.diagnosis.screening import LEADER_FIRST, leader_first
+    from watflex_sim.diagnosis.selection import LEADER_FIRST, leader_first
 
     delay = Candidate("delay", "command", {}, {}, {}, gain=0.663)
     ripple = Candidate("position_dependent_friction", "elbow", {}, {}, {}, gain=0.341, checked=0.329)
@@ -371,7 +371,7 @@ def test_leader_first_defers_only_runners_up_elsewhere_far_below_the_leader():
 
 
 def test_shortlist_adds_a_one_parameter_candidate_at_another_place():
-    """shortlist() / screening.elsewhere: seed 116, watflex-e9576ce5, round 2 (an elbow ripple found; an elbow torque
+    """shortlist() / selection.elsewhere: seed 116, watflex-e9576ce5, round 2 (an elbow ripple found; an elbow torque
     gain x0.759 missing): viscous, Coulomb and Stribeck friction at the elbow screened / simulated at 60 / 49, 56 / 50
     and 41 / 51 %, the command's current limit at 40 % but refuted by its simulation (-371 %), the gain at 36 / 28 %:
     the frictions filled the list and the gain was never fitted. The best one-parameter candidate at another place,
@@ -560,7 +560,7 @@ def test_shortlist_adds_the_simpler_law_at_the_leaders_place():
 
     stribeck, position = cand("stribeck", "hub", 3, 0.41), cand("position", "hub", 4, 0.36)
     coulomb, viscous = cand("coulomb", "hub", 2, 0.21), cand("viscous", "hub", 2, 0.20)
-    elsewhere = cand("offset", "tip", 2, 0.30)  # two parameters: not screening.elsewhere's (one-parameter) pick
+    elsewhere = cand("offset", "tip", 2, 0.30)  # two parameters: not selection.elsewhere's (one-parameter) pick
     names = [c.effect for c in shortlist([stribeck, position, elsewhere, coulomb, viscous])]
     assert names == ["stribeck", "position", "coulomb"]
     assert [c.effect for c in shortlist([stribeck, position, cand("coulomb", "hub", 2, 0.039)])] == ["stribeck", "position"]
@@ -575,7 +575,7 @@ def test_shortlist_fits_a_friction_laws_rival_law_whatever_its_rescreen_said():
     below MIN_GAIN (0.02) per parameter, at another joint, or where a law is listed there already; nothing for a
     leader that is not a friction law."""
     from watflex_sim.diagnosis import Candidate, shortlist
-    from watflex_sim.diagnosis.screening import rival_law
+    from watflex_sim.diagnosis.selection import rival_law
 
     def cand(effect, where, n, gain, checked):
         return Candidate(effect, where, {}, {f"p{i}": None for i in range(n)}, {}, gain=gain, checked=checked)

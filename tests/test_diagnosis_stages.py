@@ -8,7 +8,8 @@ import pytest
 
 from watflex_sim import load_scenario, simulate
 from watflex_sim.diagnosis import Model, Slot, intervals, prepare
-from watflex_sim.diagnosis.data import NO_NOISE_FLOOR, measured_noise, split_blocks
+from watflex_sim.diagnosis.data import NO_NOISE_FLOOR, split_blocks
+from watflex_sim.diagnosis.noise import measured_noise
 from watflex_sim.diagnosis.explain import direction, finding, indistinct, physical_place, units_at
 from watflex_sim.diagnosis.fitting import huber_threshold, residual_variance
 from watflex_sim.diagnosis.validate import explained_share
@@ -99,12 +100,12 @@ def _low_passed_noise(n: int, a: float, seed: int) -> np.ndarray:
 
 
 def test_noise_a_sensors_filter_correlated_is_measured_on_the_residual():
-    """data.coloured_noise: unit-rms noise through a first-order low-pass at 100 Hz sampled at 1 kHz (a = 0.53):
+    """noise.coloured_noise: unit-rms noise through a first-order low-pass at 100 Hz sampled at 1 kHz (a = 0.53):
     the lag-1 estimate reads sqrt(1 - 4a/3 + a^2/3) = 0.62 of it (its second differences' variance, within 5 %),
     coloured_noise its rms (within 5 %), also at 2 ms; white noise, a smooth 5 Hz misfit on it and steady lines from
     50 to 300 Hz (the frequencies whose second differences are alike at 4 and 8 ms, 83 and 167 Hz, among them) add
     nothing; nor does a low-pass at 40 Hz (a = 0.78), which has not levelled off by NOISE_LAG_S."""
-    from watflex_sim.diagnosis.data import coloured_noise
+    from watflex_sim.diagnosis.noise import coloured_noise
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
     a = math.exp(-2 * math.pi * 100.0 * 1e-3)
@@ -568,14 +569,15 @@ def test_a_channel_whose_floor_is_our_discretisation_is_judged_by_its_upper_esti
 
 
 def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
-    """validate.curved_channels (seed 58, laser_arm-51359564: a motor current reading +50 % at its peak, y = x (1 + 0.5
+    """characteristic.curved_channels (seed 58, laser_arm-51359564: a motor current reading +50 % at its peak, y = x (1 + 0.5
     (x / peak)^2), 'explained' by a gain x1.141 at 1.14 x the noise): in miniature, a current of steps and a sine, the
     cubic reading against the best gain leaves 1.17 x the noise (0.6 of it structured: 0.36 noise variances), and the
     curve must take over 90 % of the excess (to within 2 % of the noise itself) and call the verdict `unexplained`. A
     plain gain error (x1.14) leaves more (1.35 x the noise) but is a line, not a curve; a frequency 2 % off (a dynamic misfit,
     its residual 90 degrees from the value, 1.89 x the noise) is not a curve either: neither is flagged."""
     from watflex_sim.diagnosis.data import Data
-    from watflex_sim.diagnosis.validate import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels, verdict_of
+    from watflex_sim.diagnosis.characteristic import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels
+    from watflex_sim.diagnosis.validate import verdict_of
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -617,9 +619,9 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
                 [["c"]], [{"c": 1.0}], [{"c": noise}], [split_blocks(t)[0]])
     sims = [Recording(t, {"c": float(slight @ pulses / (pulses @ pulses)) * pulses}, {})]
     assert curved_channels(data, sims) == []
-    with patch("watflex_sim.diagnosis.validate.CURVE_SIGNIFICANCE", 20.0):
+    with patch("watflex_sim.diagnosis.characteristic.CURVE_SIGNIFICANCE", 20.0):
         assert curved_channels(data, sims) == []
-        with patch("watflex_sim.diagnosis.validate.CURVE_BEND", 0.0):
+        with patch("watflex_sim.diagnosis.characteristic.CURVE_BEND", 0.0):
             alone = curved_channels(data, sims)
     assert len(alone) == 1 and alone[0]["significance"] == pytest.approx(32, rel=0.25) and alone[0]["bend"] == pytest.approx(1.9, abs=0.2)
     # no curve, the model exact, white noise: the significance is chance's, ~ Exp(1) (mean 1); never near 20
@@ -628,13 +630,13 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
         measured = wave + noise * np.random.default_rng(seed).normal(size=t.size)
         data = Data([Recording(t, {"c": measured}, {})], ["a"], None, [["c"]], [{"c": 1.0}], [{"c": noise}],
                     [split_blocks(t)[0]])
-        with patch.multiple("watflex_sim.diagnosis.validate", CURVE_SHARE=-1.0, CURVE_VARIANCE=-1.0, CURVE_SIGNIFICANCE=-1.0):
+        with patch.multiple("watflex_sim.diagnosis.characteristic", CURVE_SHARE=-1.0, CURVE_VARIANCE=-1.0, CURVE_SIGNIFICANCE=-1.0):
             chance.append(curved_channels(data, [Recording(t, {"c": wave}, {})])[0]["significance"])
     assert np.mean(chance) == pytest.approx(1.0, abs=0.35) and max(chance) < CURVE_SIGNIFICANCE / 2
 
 
 def test_a_loop_that_sticks_elsewhere_at_each_hold_is_not_a_curve():
-    """validate.curved_channels asks a large curve to be significant too. An encoder in a staircase whose six holds
+    """characteristic.curved_channels asks a large curve to be significant too. An encoder in a staircase whose six holds
     each stick a little elsewhere (offsets -0.8 ... +2.0 x the noise, as seed 83's two-joint watflex-490a4521, the
     truth's delay found and the model within the noise, its shoulder encoder 0.81 noise variances, 51 % of the excess
     taken by a cubic, 3.7 x chance): the cubic of the six levels takes 0.77 noise variances, 51 % of the excess, but
@@ -642,7 +644,7 @@ def test_a_loop_that_sticks_elsewhere_at_each_hold_is_not_a_curve():
     from scipy.signal import lfilter
 
     from watflex_sim.diagnosis.data import Data
-    from watflex_sim.diagnosis.validate import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels
+    from watflex_sim.diagnosis.characteristic import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -654,7 +656,7 @@ def test_a_loop_that_sticks_elsewhere_at_each_hold_is_not_a_curve():
     measured = x + stuck + noise * np.random.default_rng(1).normal(size=t.size)
     data = Data([Recording(t, {"c": measured}, {})], ["a"], None, [["c"]], [{"c": 0.5}], [{"c": noise}], [split_blocks(t)[0]])
     assert curved_channels(data, [Recording(t, {"c": x}, {})]) == []
-    with patch("watflex_sim.diagnosis.validate.CURVE_SIGNIFICANCE", -1.0):
+    with patch("watflex_sim.diagnosis.characteristic.CURVE_SIGNIFICANCE", -1.0):
         (found,) = curved_channels(data, [Recording(t, {"c": x}, {})])
     taken = found["noise_ratio"] ** 2 - found["with_curve"] ** 2
     assert taken == pytest.approx(0.77, abs=0.05) and taken > CURVE_VARIANCE and found["share"] > CURVE_SHARE
@@ -751,7 +753,7 @@ def test_a_sensor_that_drifts_is_not_explained():
 
 def test_effective_samples_of_white_noise_and_of_a_smooth_misfit():
     """White noise is worth its length (within 10 %); a 0.5 Hz sine sampled at 1 kHz for 6 s, a few per period."""
-    from watflex_sim.diagnosis.validate import effective_samples
+    from watflex_sim.diagnosis.characteristic import effective_samples
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
     assert effective_samples(np.random.default_rng(2).normal(size=t.size)) == pytest.approx(t.size, rel=0.1)

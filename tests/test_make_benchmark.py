@@ -303,7 +303,7 @@ def test_the_scorer_records_a_proposed_experiment_as_the_rig_recorded_the_case(b
     datasheet's 0.01 m: a noise-free file was the one the diagnosis could not match to its noise), the same
     bytes each time, and by the benchmark's recorder (30 segments at half the step differ from ours). A pair case's
     second effect is the rig's too (a 20 ms command delay changes the file; at 0 s, the neutral value, it does not)."""
-    from watflex_sim.diagnosis.data import measured_noise
+    from watflex_sim.diagnosis.noise import measured_noise
     from watflex_sim.resim import scenario_from_recording
 
     out, truth = bench

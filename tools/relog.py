@@ -10,7 +10,7 @@ logged at 2 ms), its time shifted to start at `--start-s` s, a share `--empty` o
 up to `--jitter-s` s (uniform; the values stay those of the sample: a logger that stamps when it writes), time in
 `--time-unit` (s or ms; ms is declared in the sidecar as recordings.md asks), `--filtered-noise` x its declared noise
 added to each measured channel the rig declares a noise for and whose values are not quantised (not the encoders', the
-12-bit strain bridges': data.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
+12-bit strain bridges': noise.QUANTUM_SHARE), through a first-order low-pass at `--filter-hz` (a sensor's anti-alias
 filter or amplifier), `--glitches` single samples of each measured channel with a declared noise moved by
 `--glitch-size` x that noise (either sign; a logger's glitches, after the sampling; a channel with fewer values, as
 many fewer), the columns `--hold` written in every row as their last value (a slower sensor, the 25 Hz camera, held
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from watflex_sim.diagnosis.data import quantised
+from watflex_sim.diagnosis.noise import quantised
 from watflex_sim.rigdesc import load_rig
 
 TIME_UNITS = {"s": (1.0, 7), "ms": (1e3, 4)}  # unit -> (its count per s, decimals written: 0.1 us either way)

@@ -2,16 +2,19 @@
 
 One module per stage, each with its contract in its docstring:
   data        recordings in a canonical order, channels, spreads, noise, the train/validation blocks
+  noise       noise levels measured on the data (white, a quantised grid's, correlated by a sensor's filter)
   scores      NRMSE, correlation and ratios to the noise of a model's simulations, per channel and on the whole
   motion      what moves in the recordings; the sizes catalogue parameters are measured in
   runner      re-simulation jobs in worker processes
   fitting     Levenberg-Marquardt on bounded slots, 95 % intervals
   refit       the nominal model re-simulated, the rig's parameters refit, what noise and discretisation leave
-  screening   candidate effects, their signatures, the screening and the shortlist
+  screening   candidate effects, their signatures, the screening
+  selection   which screened candidates a round fits in full (the shortlist), and which first
   rescreen    the best-screening candidates checked by simulation at their linear estimates
   effect_fit  the fit of one candidate effect (a quantised step's search; from a scan's start too)
   scan        scans of a ripple's period and of a shape parameter (a time constant): where a fit starts
   validate    whether a finding earns its place on validation data; backward elimination; the verdict
+  characteristic a channel's residual that is a static curve of its own value (a nonlinear sensor)
   disturbance a steady line or drift in a residual that no catalogue effect makes (mains hum, a sensor's drift)
   refine      the chosen candidate's polish (a ripple's period scanned again) and the other forms of the same finding
   laws        one friction law in the place of two found at one joint
@@ -33,7 +36,8 @@ from .motion import motion_channel, scale_of
 from .pipeline import diagnose
 from .runner import simulate_all
 from .scores import fit_scores, noise_nrmse, noise_ratio
-from .screening import MIN_GAIN, Candidate, concealed, screen, shortlist
+from .screening import MIN_GAIN, Candidate, concealed, screen
+from .selection import shortlist
 from .validate import MIN_HELD_GAIN, NOISE_MARGIN
 
 __all__ = [

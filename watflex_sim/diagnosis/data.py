@@ -21,6 +21,7 @@ from ..model import ConfigError
 from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
 from .glitch import without_glitches, without_held
+from .noise import PLATEAU, coloured_noise, measured_noise, quantised, visible_noise
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
 BLOCKS_PER_RECORDING = 60  # blocks per recording, in pairs of one training and one validation block (split_blocks):
@@ -29,20 +30,10 @@ BLOCK_LIMITS_S = (0.02, 0.25)  # s: shortest and longest block
 SPLIT_SEED = 20261124  # fixed: the same recording is always split the same way (salted with its content)
 STRIDE = 4  # samples: residuals are taken every STRIDE samples while fitting
 MIN_SPAN_S = 0.05  # s: a recording shorter than this is too short to simulate and diagnose
-UNRESOLVED = 1e-6  # x a channel's spread (std): a noise estimate below this is the file's number format, not the rig's
-# noise (ten significant digits round at ~1e-10 of a value); `prepare` then takes the channel as showing no noise
 NO_NOISE_FLOOR = 1e-3  # x a channel's spread: its noise where neither the rig declares one nor the data show one
 TICK_JITTER = 1e-3  # x the control period: time stamps further than this off the loop's ticks are moved onto them (on_ticks)
 ON_GRID = 0.2  # the least mean resultant length of the stamps' phases on the loop's period for a jittered grid (on_ticks):
 # uniform jitter up to +-0.4 of a period has 0.23, up to +-0.25 0.64; stamps unrelated to the loop ~1 / sqrt(samples)
-QUANTUM_SHARE = 0.1  # add_coloured_noise: a channel whose grid's rms step (step / sqrt(12)) is above this x its
-# coloured_noise is quantised: its quantisation error, correlated where it moves slowly, levels off too (seed 97's
-# two-joint encoders re-logged at 2 ms: at 3.5-4 x their step's rms against the nominal model)
-NOISE_LAG_S = 8e-3  # s: the longest lag coloured_noise compares second differences at (noise correlated over up to
-# about a quarter of it, a sensor's first-order anti-alias filter at 80 Hz or above, shows its whole rms there)
-PLATEAU = 1.1  # coloured_noise: estimates within this factor of each other over a range of lags are level
-COLOUR_LIMIT = 2.0  # coloured_noise: at most this x the lag-1 estimate (a first-order low-pass that levels off within
-# NOISE_LAG_S shows at least 0.55 of its rms at lag 1; an encoder's steps, 1e5 x, are not a sensor's noise)
 DISCRETISATION_COUNT = 2.0  # a channel judged on its own (worst_channel) and a window (locate.local_null) count what a
 # finer discretisation changes this many times: against twice as fine is a lower bound of our own error (4 x finer:
 # 1.3 x more), and recordings from another implementation of the datasheet carry that one's own
@@ -108,81 +99,6 @@ def _fingerprint(rec: Recording) -> str:
         h.update(c.encode())
         h.update(np.ascontiguousarray(rec.channels[c]).tobytes())
     return h.hexdigest()
-
-
-def second_difference_noise(values: np.ndarray, lag: int = 1) -> float:
-    """White noise's rms estimated from second differences `lag` samples apart (the values' unit): their median
-    absolute deviation / 0.6745 / sqrt(6). Smooth motion sampled fast contributes little (a sinusoid's second
-    difference is (w lag dt)^2 of it); 0 with fewer than 2 lags + 3 finite samples."""
-    x = values[np.isfinite(values)]
-    if x.size < 2 * lag + 3:
-        return 0.0
-    d2 = x[2 * lag:] - 2.0 * x[lag:-lag] + x[:-2 * lag]
-    return float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / math.sqrt(6)
-
-
-def measured_noise(values: np.ndarray) -> float:
-    """Noise rms estimated from the data itself (its unit): second_difference_noise of consecutive samples,
-    at least the rms of a uniform quantisation step when the values are quantised."""
-    x = values[np.isfinite(values)]
-    if x.size < 5:
-        return 0.0
-    sigma = second_difference_noise(x)
-    levels = np.unique(x)
-    if 1 < levels.size < 0.5 * x.size:  # quantised: an encoder, a converter
-        sigma = max(sigma, float(np.median(np.diff(levels))) / math.sqrt(12))
-    return sigma
-
-
-def grid_step(values: np.ndarray) -> float:
-    """The step of the grid the finite values lie on (their unit: an encoder's count, a converter's least bit, a
-    file's last printed digit): the smallest change between consecutive samples where every change is a whole
-    multiple of it (within 1 %); 0 where they lie on none or hardly change."""
-    x = values[np.isfinite(values)]
-    change = np.abs(np.diff(x))
-    change = change[change > 0]
-    if change.size < 10:
-        return 0.0
-    steps = change / change.min()
-    return float(change.min()) if np.all(np.abs(steps - np.round(steps)) < 0.01) else 0.0
-
-
-def quantised(values: np.ndarray, noise: float) -> bool:
-    """Whether `values` lie on a grid coarse against `noise` (their unit): the grid's rms step (step / sqrt(12)) at
-    least QUANTUM_SHARE x it (an encoder's counts, a 12-bit converter's least bit)."""
-    return grid_step(values) / math.sqrt(12) >= QUANTUM_SHARE * noise
-
-
-def coloured_noise(residual: np.ndarray, dt: float) -> float:
-    """The rms of noise correlated over a few samples (a sensor's anti-alias filter, an amplifier's bandwidth),
-    measured on a model's residual (its unit; `dt` the sample spacing, s), or 0 where the residual shows none.
-    second_difference_noise estimates white noise's rms alike at every lag; noise correlated over a few samples
-    shows less at lag 1 (a first-order low-pass at 100 Hz sampled at 1 kHz: 0.62 of its rms) and rises to its rms
-    once the correlation has died, where a smooth misfit grows as lag^2 and a steady line (a hum) swings with the
-    lag. So: the estimate at the longest lag up to NOISE_LAG_S where it is level (every lag from half that to it
-    within a factor PLATEAU) and above the lag-1 estimate by more than PLATEAU, up to COLOUR_LIMIT x; else 0.
-    Seed 94's clean laser case with that noise added to its tip sensor and motor current at twice their declared
-    rms (docs/diagnosis.md, "Noise a sensor's filter correlated") read 0.69 x their noise at lag 1 and came out
-    `unexplained`, its motor current 1.41 x that floor."""
-    longest = int(round(NOISE_LAG_S / dt)) if dt > 0 else 0
-    if longest < 2:
-        return 0.0
-    level = [second_difference_noise(residual, lag) for lag in range(longest // 2, longest + 1)]
-    white = second_difference_noise(residual)
-    if max(level) > PLATEAU * min(level) or not PLATEAU * white < level[-1] <= COLOUR_LIMIT * white:
-        return 0.0
-    return level[-1]
-
-
-def visible_noise(values: np.ndarray, spread: float) -> float:
-    """measured_noise (the values' unit), or 0 where it is below UNRESOLVED x `spread`: the data resolve no noise.
-    A channel at rest more than half the time (a torque command holding still) has a median second difference at
-    its last printed digit: seed 97's clean two-joint case (watflex-df2f6bbb) re-sampled at 2 ms measured a shoulder
-    command's noise at 6e-9 N m (3e-10 of its spread; 0.019 N m on its two sister recordings), and the refit in
-    noise units weighed that channel 1e9 x the others and could not move (27 x the noise where the 1 ms files'
-    refit reached 0.92 x)."""
-    sigma = measured_noise(values)
-    return sigma if sigma > UNRESOLVED * spread else 0.0
 
 
 def on_ticks(rec: Recording, period: float) -> tuple[Recording, float]:

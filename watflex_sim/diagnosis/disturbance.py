@@ -23,7 +23,7 @@ import numpy as np
 from scipy.signal import find_peaks
 
 from .data import Data
-from .validate import effective_samples
+from .characteristic import effective_samples
 
 LINE_SIGNIFICANCE = 100.0  # its periodogram bin over the median of the bins beside it (white noise: an Exp(1) over
 # ln 2, at most ~12 in 3,000 bins by chance)
@@ -37,7 +37,7 @@ LINE_PEAKS = 5  # the residual periodogram's peaks asked, in turn, highest over 
 # smaller than a misfit at the model's vibration, which the simulation carries too)
 LINE_CYCLES = 10.0  # the lowest frequency asked: this many cycles in the recording (below it: a drift, not a line)
 DRIFT_SIGNIFICANCE = 100.0  # a trend in time: its gain over what chance gives one regressor on the residual's
-# independent samples (validate.effective_samples; without a trend ~ chi-square with 1 degree of freedom)
+# independent samples (characteristic.effective_samples; without a trend ~ chi-square with 1 degree of freedom)
 DRIFT_VARIANCE = 0.05  # ... taking at least this many noise variances
 DRIFT_STEADY = 0.5  # ... the same sign in each half of the recording, the slower half's rate this share of the faster's
 # (a drift of the sensor goes on at its rate; a model that settles elsewhere after a step does not)

@@ -27,6 +27,7 @@ from copy import deepcopy
 import numpy as np
 
 from ..recording import Recording
+from .characteristic import curved_channels
 from .data import Data, Model, prepare, residual_vector, unit_change
 from .disturbance import disturbances
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
@@ -41,11 +42,11 @@ from .refit import (FLOORS, calibrate_noise, fine_for_round, keep_fidelity, rais
 from .rescreen import RESCREEN, rescreen
 from .runner import Runner, evaluator, in_units
 from .scores import fit_scores, noise_nrmse, noise_table, step
-from .screening import (LEADER_FIRST, SCREEN_TOP, candidates, concealed, leader_first, make_candidate, screen, shortlist,
-                        signatures, with_findings)
+from .screening import candidates, concealed, make_candidate, screen, signatures, with_findings
+from .selection import LEADER_FIRST, SCREEN_TOP, leader_first, shortlist
 from .settle import settle
 from .tolerance import at_bounds, beyond_tolerance
-from .validate import (NOISE_MARGIN, curved_channels, earns_place, explained_share, far_gain, gains, near_place, rival,
+from .validate import (NOISE_MARGIN, earns_place, explained_share, far_gain, gains, near_place, rival,
                        shortfall, verdict_of, verdict_reason, within_noise)
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
@@ -75,7 +76,7 @@ class Stages:
 def settling_fit(data: Data, results: list[dict]) -> dict | None:
     """The first of `fit_candidates`' results that fits training and validation to within the noise on every
     channel (validate.within_noise), or None: the round's leader fitted, its deferred runners-up can at most tie it
-    (screening.leader_first)."""
+    (selection.leader_first)."""
     return next((r for r in results if "sims" in r and within_noise(
         fit_scores(data, r["sims"], "train"), fit_scores(data, r["sims"], "held_out"))), None)
 

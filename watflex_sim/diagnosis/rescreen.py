@@ -5,7 +5,7 @@ training cost a simulation at its estimate, or half-way to it, leaves once the r
 far are refit to first order) and moves its `estimate` where a simulation gains more: on along its line while that
 gains or where the estimate loses (`looks_further`, `further`, then `search_along` between the moves), a link's
 stiffness on a ladder of rungs (`ladder`), a log-scaled switch half a level either side (`between_levels`).
-screening.shortlist then reads `checked`.
+selection.shortlist then reads `checked`.
 """
 from __future__ import annotations
 
