@@ -47,7 +47,7 @@ from .selection import LEADER_FIRST, SCREEN_TOP, leader_first, shortlist
 from .settle import settle
 from .tolerance import at_bounds, beyond_tolerance
 from .validate import (NOISE_MARGIN, earns_place, explained_share, far_gain, gains, near_place, rival,
-                       shortfall, verdict_of, verdict_reason, within_noise)
+                       shortfall, told_apart, verdict_of, verdict_reason, within_noise)
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
@@ -311,7 +311,8 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     share = explained_share(refit_held["noise_ratio"], held_f["noise_ratio"])
     curved, disturbed = curved_channels(data, sims), disturbances(data, sims)
     verdict = verdict_of(current, train_f, held_f, share, curved, local, disturbed)
-    alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)]
+    alternatives = [a for a in alternatives if any(f["effect"] == a["instead_of"] for f in findings)
+                    and not told_apart(a, held_f)]
     report = {
         "format": "flexarm-diagnosis/1",
         "rig": data.rig.name,

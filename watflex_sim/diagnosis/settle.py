@@ -9,7 +9,8 @@ final model does not need it on validation (validate.eliminate) or its intervals
 without it is not far worse (validate.vague_findings; one at a time, the one validation minds least); what is left is
 refit on the training blocks, from the round's fit of the same findings if there was one, and the floors measured
 again without the dropped (refit.floors_after_dropping) where a finding had raised them. Before it is judged, a model
-short of the noise but near it is carried on by the pattern search on the training blocks (pattern.pattern_polish). Of
+short of the noise but near it is carried on by the pattern search on the training blocks (pattern.pattern_polish), and
+one still outside it has its findings' steps and shapes searched again there (refit.levels_on_training). Of
 two or more findings, one that the rest and the rig's parameters carried on by that search explain as well is dropped
 (`spare_a_later_finding`); so is a friction finding that the rig's friction scale at its joint explains within its
 tolerance (`spare_for_a_rig_parameter`). `steps` and `rejected` (the report's lists) get what happened appended.
@@ -22,7 +23,8 @@ import numpy as np
 
 from .data import Data, Model
 from .pattern import COMPASS_REACH, pattern_polish
-from .refit import FLOORS, final_refit, floors_after_dropping, held_without, refit_on_training, without_findings
+from .refit import (FLOORS, final_refit, floors_after_dropping, held_without, levels_on_training, refit_on_training,
+                    without_findings)
 from .runner import Runner
 from .scores import fit_scores, step
 from .tolerance import fold_within_tolerance
@@ -63,6 +65,13 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
             current = polished
             steps.append(step("parameters carried on by a pattern search", data, sims, current))
         train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")  # judged before the final refit
+        if current.effects and not within_noise(train_f, held_f):  # a finding's step or shape held since its round
+            moved, sims = levels_on_training(data, runner, current, sims)
+            if moved is not current:
+                say("polish", "a finding's step or shape searched again on the training blocks")
+                current = moved
+                steps.append(step("a finding's step or shape searched again on the training blocks", data, sims, current))
+                train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         trained = current
         if current.effects:
             say("final refit", "refitting the findings' and the rig's parameters on all the data (training and validation)")

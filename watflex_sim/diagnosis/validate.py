@@ -118,6 +118,16 @@ def rival(result: dict, chosen: dict, later: bool, absorbable: float) -> bool:
         ratio <= 1.0 and best <= 1.0 and ratio**2 - best**2 <= absorbable and earns_place(result, later))
 
 
+def told_apart(alternative: dict, held: dict) -> bool:
+    """Whether the final model's validation scores `held` (fit_scores) are within NOISE_MARGIN x the noise while an
+    alternative listed in an earlier round (refine.alternative_entry) stays beyond that margin and beyond
+    ALTERNATIVE_MARGIN of the final model's: the data tell them apart once the model is settled. Seed 120's
+    laser_arm-91f8db5b: a hub ripple listed at 5.90 x the noise beside the round's 5.76 x, the model at 0.76 x once its
+    delay's step was searched again (refit.levels_on_training)."""
+    ratio = alternative["validation_noise_ratio"]
+    return held["noise_ratio"] <= NOISE_MARGIN < ratio and ratio > (1.0 + ALTERNATIVE_MARGIN) * held["noise_ratio"]
+
+
 def far_gain(result: dict) -> bool:
     """Whether a later candidate, its round begun with validation FAR_FROM_NOISE x the noise or more, gains on training
     and on validation what a finding's parameters cost (MIN_GAIN each, on both): far from the noise that is evidence
