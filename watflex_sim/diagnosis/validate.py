@@ -7,8 +7,9 @@ MIN_EXCESS_GAIN of what validation has above the noise, or where validation is F
 training and validation what its parameters cost (far_gain) (with training already within the noise, removing
 MIN_EXCESS_GAIN of validation's excess without making training worse is enough; in a round asked for by windows far
 above their local null, locate.local_excess, removing LOCAL_GAIN of their excess). `rival` says which other fitted
-candidates are alternatives to the chosen one. `eliminate` drops findings the final model does not need on validation
-data (or those windows); `vague_findings` those the data do not tell from no effect. `verdict_of`: `nothing_missing`
+candidates are alternatives to the chosen one, `told_apart` which of them the settled model leaves behind.
+`eliminate` drops findings the final model does not need on validation data (or those windows); `vague_findings`
+those the data do not tell from no effect. `verdict_of`: `nothing_missing`
 only when a model without findings is within NOISE_MARGIN x the noise on training AND validation data and no window
 is far above its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
 excess, unless the whole is within the noise and one channel stays far above it: `lone_channel`), `unexplained`
