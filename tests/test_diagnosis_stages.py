@@ -569,7 +569,7 @@ def test_a_channel_whose_floor_is_our_discretisation_is_judged_by_its_upper_esti
 
 
 def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
-    """characteristic.curved_channels (seed 58, laser_arm-51359564: a motor current reading +50 % at its peak, y = x (1 + 0.5
+    """curved_channels (seed 58, laser_arm-51359564: a motor current reading +50 % at its peak, y = x (1 + 0.5
     (x / peak)^2), 'explained' by a gain x1.141 at 1.14 x the noise): in miniature, a current of steps and a sine, the
     cubic reading against the best gain leaves 1.17 x the noise (0.6 of it structured: 0.36 noise variances), and the
     curve must take over 90 % of the excess (to within 2 % of the noise itself) and call the verdict `unexplained`. A
@@ -630,13 +630,14 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
         measured = wave + noise * np.random.default_rng(seed).normal(size=t.size)
         data = Data([Recording(t, {"c": measured}, {})], ["a"], None, [["c"]], [{"c": 1.0}], [{"c": noise}],
                     [split_blocks(t)[0]])
-        with patch.multiple("watflex_sim.diagnosis.characteristic", CURVE_SHARE=-1.0, CURVE_VARIANCE=-1.0, CURVE_SIGNIFICANCE=-1.0):
+        with patch.multiple("watflex_sim.diagnosis.characteristic", CURVE_SHARE=-1.0, CURVE_VARIANCE=-1.0,
+                            CURVE_SIGNIFICANCE=-1.0):
             chance.append(curved_channels(data, [Recording(t, {"c": wave}, {})])[0]["significance"])
     assert np.mean(chance) == pytest.approx(1.0, abs=0.35) and max(chance) < CURVE_SIGNIFICANCE / 2
 
 
 def test_a_loop_that_sticks_elsewhere_at_each_hold_is_not_a_curve():
-    """characteristic.curved_channels asks a large curve to be significant too. An encoder in a staircase whose six holds
+    """curved_channels asks a large curve to be significant too. An encoder in a staircase whose six holds
     each stick a little elsewhere (offsets -0.8 ... +2.0 x the noise, as seed 83's two-joint watflex-490a4521, the
     truth's delay found and the model within the noise, its shoulder encoder 0.81 noise variances, 51 % of the excess
     taken by a cubic, 3.7 x chance): the cubic of the six levels takes 0.77 noise variances, 51 % of the excess, but

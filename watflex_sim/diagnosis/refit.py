@@ -295,7 +295,8 @@ def _again_from(data: Data, runner: Runner, evaluate, free: list[Slot], start: M
     return again, _training_fit(data, runner, start, free), r_again
 
 
-def levels_on_training(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording]]:
+def levels_on_training(data: Data, runner: Runner, model: Model,
+                       sims: list[Recording]) -> tuple[Model, list[Recording]]:
     """`model` refit on the training blocks again from a point further along a finding's quantised or shape parameter
     where a short profile there predicts less cost (level.level_start: final_refit's search, on the blocks the
     verdict's validation leaves out), kept where that ends lower on training and no worse on validation; `model` and
@@ -318,7 +319,8 @@ def levels_on_training(data: Data, runner: Runner, model: Model, sims: list[Reco
     again = _training_fit(data, runner, start, free)
     r_again = evaluate([again])[0]
     new = runner.simulate(again) if r_again is not None and float(r_again @ r_again) < float(r @ r) else None
-    if new is None or fit_scores(data, new, "held_out")["noise_ratio"] > fit_scores(data, sims, "held_out")["noise_ratio"]:
+    held = lambda s: fit_scores(data, s, "held_out")["noise_ratio"]  # noqa: E731
+    if new is None or held(new) > held(sims):
         return model, sims
     return again, new
 

@@ -5,8 +5,8 @@ Contract: `candidates` lists the (effect, place) pairs the rig description allow
 as the model (SCREEN_FINER); `screen` scores each by how much of the training residual its signature explains beyond
 refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate as its
 start; `rescreen.rescreen` checks the best by simulation at that estimate; `selection.shortlist` names the candidates to
-fit in full (effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the datasheet model's
-residual, where the refit took an effect up.
+fit in full (effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the datasheet
+model's residual, where the refit took an effect up.
 """
 from __future__ import annotations
 

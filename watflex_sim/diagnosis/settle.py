@@ -70,7 +70,8 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
             if moved is not current:
                 say("polish", "a finding's step or shape searched again on the training blocks")
                 current = moved
-                steps.append(step("a finding's step or shape searched again on the training blocks", data, sims, current))
+                steps.append(step("a finding's step or shape searched again on the training blocks", data, sims,
+                                  current))
                 train_f, held_f = fit_scores(data, sims, "train"), fit_scores(data, sims, "held_out")
         trained = current
         if current.effects:

@@ -188,9 +188,10 @@ def within_noise(scores_train: dict, scores_held: dict) -> bool:
 def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict], local: list[dict] = (),
                disturbed: list[dict] = ()) -> str:
     """The verdict for a final `model` whose fit_scores are `train` and `held` (validation), its findings
-    removing `share` of validation's excess over the noise (explained_share), `curved` its characteristic.curved_channels,
-    `local` the windows far above their local null that asked for a round (locate.local_excess), `disturbed` the
-    channels whose residual carries a steady line or drift no catalogue effect makes (disturbance.disturbances)."""
+    removing `share` of validation's excess over the noise (explained_share), `curved` its
+    characteristic.curved_channels, `local` the windows far above their local null that asked for a round
+    (locate.local_excess), `disturbed` the channels whose residual carries a steady line or drift no catalogue effect
+    makes (disturbance.disturbances)."""
     if curved or disturbed:
         return "unexplained"
     if not model.effects:
