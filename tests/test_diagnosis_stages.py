@@ -122,11 +122,11 @@ def test_noise_a_sensors_filter_correlated_is_measured_on_the_residual():
 
 
 def test_the_noise_floor_of_a_measured_channel_is_raised_to_its_coloured_noise():
-    """data.add_coloured_noise: a 3 s laser step whose tip sensor and voltage command carry low-pass noise of 0.02 V
+    """floors.add_coloured_noise: a 3 s laser step whose tip sensor and voltage command carry low-pass noise of 0.02 V
     rms (100 Hz, as above) besides the rig's: against the same step without it, the tip sensor's noise and sensor
     noise are raised to that (within 10 %: 3,000 samples' estimate), the command's are left (a command's noise is
     the closed-loop part's, add_closed_loop_noise) and so is the motor current, whose residual is nil."""
-    from watflex_sim.diagnosis.data import add_coloured_noise
+    from watflex_sim.diagnosis.floors import add_coloured_noise
 
     rec = simulate(load_scenario("laser_arm_step", ["duration_s=3", "seed=0"])).recording
     extra = 0.02 * _low_passed_noise(rec.time.size, math.exp(-2 * math.pi * 100.0 * 1e-3), 3)  # V
@@ -577,7 +577,7 @@ def test_a_residual_that_is_a_curve_of_its_channel_is_not_explained():
     its residual 90 degrees from the value, 1.89 x the noise) is not a curve either: neither is flagged."""
     from watflex_sim.diagnosis.data import Data
     from watflex_sim.diagnosis.characteristic import CURVE_SHARE, CURVE_SIGNIFICANCE, CURVE_VARIANCE, curved_channels
-    from watflex_sim.diagnosis.validate import verdict_of
+    from watflex_sim.diagnosis.verdict import verdict_of
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -678,7 +678,7 @@ def test_a_steady_line_the_simulation_lacks_is_not_explained():
 
     from watflex_sim.diagnosis.data import Data
     from watflex_sim.diagnosis.disturbance import steady_lines
-    from watflex_sim.diagnosis.validate import verdict_of, verdict_reason
+    from watflex_sim.diagnosis.verdict import verdict_of, verdict_reason
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -723,7 +723,7 @@ def test_a_sensor_that_drifts_is_not_explained():
 
     from watflex_sim.diagnosis.data import Data
     from watflex_sim.diagnosis.disturbance import disturbances, steady_drifts
-    from watflex_sim.diagnosis.validate import verdict_reason
+    from watflex_sim.diagnosis.verdict import verdict_reason
     from watflex_sim.recording import Recording
 
     t = np.arange(0.0, 6.0, 1e-3)  # s
@@ -764,7 +764,7 @@ def test_effective_samples_of_white_noise_and_of_a_smooth_misfit():
 def test_compass_search_crosses_a_rough_cost():
     """A quadratic with a saw-tooth on top (stick-slip's rough cost, local minima every 0.01):
     from 0.5 the pattern search lands within 0.02 of the minimum at 0.83."""
-    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.pattern import compass
 
     def residual(m):
         a = m.parameters["a"]
@@ -783,7 +783,7 @@ def test_the_compass_stops_where_no_step_could_make_a_move():
     searched one sweep, not halved until its steps change the cost by less than the resolution (7 sweeps
     before, the step halved from 0.5 to 0.0078, where 0.5 x 100 x ((0.33 + 0.0078)^2 - 0.33^2) = 0.26).
     Near the noise the resolution decides as before (test_the_refit_compass_goes_on_until_...)."""
-    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.pattern import compass
     from watflex_sim.diagnosis.pattern import CHI2_RESOLUTION
 
     calls = []
@@ -803,7 +803,7 @@ def test_a_slot_at_its_bound_does_not_hold_the_compass():
     0.5 x 100 x (1.0^2 - 0.5^2) = 37.5 more; one sweep, where halving until that change fell below the resolution
     took 7 (seed 56's laser tip-sensor gain x1.081 case, all five rig parameters at their bounds: 186 -> 78
     simulations in its refit, the same refit)."""
-    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.pattern import compass
     from watflex_sim.diagnosis.pattern import CHI2_RESOLUTION
 
     calls = []
@@ -822,7 +822,7 @@ def test_the_compass_stops_at_the_first_move_that_is_enough():
     cases of seeds 55-56 training and validation were within the noise after its first one or two moves and
     it searched on to its 14 sweeps). Here 10 (a - 0.83) from 0.5: moves to 1.0 (step 0.5), then 0.75 (step
     0.25), which is enough (within 0.1 of 0.83): three sweeps, and the model returned is the one judged."""
-    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.pattern import compass
     from watflex_sim.diagnosis.pattern import CHI2_RESOLUTION
 
     calls, judged = [], []
@@ -932,7 +932,7 @@ def test_the_refit_compass_goes_on_until_the_noise_resolves_no_step():
     link2_EI 0.97947 against 0.9791, strain_2A 1.32 x; now 0.9791, nothing_missing)."""
     from watflex_sim.diagnosis.data import residual_vector
     from watflex_sim.diagnosis.scores import channel_ratios
-    from watflex_sim.diagnosis.fitting import compass
+    from watflex_sim.diagnosis.pattern import compass
     from watflex_sim.diagnosis.pattern import CHI2_RESOLUTION, COMPASS_SWEEPS
 
     data, simulate_ = _camera_and_strain()
@@ -1422,7 +1422,7 @@ def test_the_discretisation_error_joins_the_noise_floor(laser_recordings):
     flexible parts keeps its segments; one without parameters, a datasheet's, halves its compiled step);
     add_discretisation_error adds the RMS difference to a finer simulation
     in quadrature to each channel's noise and keeps it for the report."""
-    from watflex_sim.diagnosis.data import add_discretisation_error
+    from watflex_sim.diagnosis.floors import add_discretisation_error
     from watflex_sim.recording import Recording
     from watflex_sim.resim import finer_discretisation, scenario_from_recording
     from watflex_sim.rigdesc import load_rig
@@ -1590,7 +1590,8 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     stays an interval worth having (measured: 0.4025 kg, alone [0.4003, 0.4029], widened [0.3874, 0.4158]: +-3.6 %;
     the same digits with the former bound sd |P e| / s)."""
     from watflex_sim.diagnosis import uncertainty
-    from watflex_sim.diagnosis.data import add_discretisation_error, unit_change
+    from watflex_sim.diagnosis.data import unit_change
+    from watflex_sim.diagnosis.floors import add_discretisation_error
     from watflex_sim.diagnosis.fitting import effect_slots_of, levenberg, value_of
     from watflex_sim.diagnosis.runner import Runner, evaluator, in_units
 
@@ -2371,7 +2372,7 @@ def test_where_the_moving_joints_encoder_is_not_recorded_its_motion_is_simulated
 def _local_case(misfit: float, discretisation: float = 0.0, seed: int = 7):
     """A 6 s strain channel at 1 kHz, white sensor noise 0.01 V (its whole-recording noise), measured = the model + a
     bump of `misfit` x the noise over 0.1 s at 2 s (a misfit at one transient), the model's discretisation changing
-    it by `discretisation` x the noise over the same 0.1 s (refit.calibrate_noise's per-sample record)."""
+    it by `discretisation` x the noise over the same 0.1 s (floors.calibrate_noise's per-sample record)."""
     from watflex_sim.diagnosis.data import Data
     from watflex_sim.recording import Recording
     from watflex_sim.rigdesc import load_rig
@@ -2398,7 +2399,8 @@ def test_a_misfit_at_one_transient_is_not_within_the_noise():
     1 + (2 x 2)^2 = 17 noise variances, the window sqrt(82 / 17) = 2.2 x (counted once: sqrt(82 / 5) = 4.05 x, flagged)."""
     from watflex_sim.diagnosis.scores import fit_scores
     from watflex_sim.diagnosis.locate import LOCAL_MARGIN, local_excess, local_gain, local_ratio
-    from watflex_sim.diagnosis.validate import verdict_of, within
+    from watflex_sim.diagnosis.validate import within
+    from watflex_sim.diagnosis.verdict import verdict_of
 
     data, sims, exact = _local_case(6.0)
     whole = fit_scores(data, sims, "all")
@@ -2421,11 +2423,11 @@ def test_a_misfit_at_one_transient_is_not_within_the_noise():
 
 
 def test_a_verdict_reached_at_the_effect_limit_does_not_claim_the_catalogue_was_searched():
-    """validate.verdict_reason: where the search stopped at max_effects (`limit`) the reason says so instead of "no
+    """verdict.verdict_reason: where the search stopped at max_effects (`limit`) the reason says so instead of "no
     further catalogue effect earns its place", which only a round that fitted the candidates and kept none can say
     (EMPS both runs at --max-effects 1: `unexplained` at 29.8 x the noise after one finding, its reason claimed the
     catalogue had been tried). Scores in noise units, as fit_scores gives them."""
-    from watflex_sim.diagnosis.validate import verdict_reason
+    from watflex_sim.diagnosis.verdict import verdict_reason
 
     far = {"noise_ratio": 25.8, "worst_ratio": 36.3, "worst_channel": "vir"}
     refit = {"noise_ratio": 47.8, "worst_ratio": 77.9, "worst_channel": "vir"}
@@ -2440,13 +2442,14 @@ def test_a_verdict_reached_at_the_effect_limit_does_not_claim_the_catalogue_was_
 
 
 def test_one_channel_far_above_its_noise_is_not_explained_by_the_share_of_the_mean():
-    """validate.lone_channel: findings that remove EXPLAINED_SHARE of the mean's excess explain the data unless the
+    """verdict.lone_channel: findings that remove EXPLAINED_SHARE of the mean's excess explain the data unless the
     whole is within the noise and one channel stays beyond LONE_CHANNEL x its own. Scores of seed 81's
     laser_arm-493fe444 (a motor-current sensor gain x1.82 beside a backlash, found as the backlash and a beam damping
     x6.7): training 0.61 x, validation 1.02 x, the motor current 2.82 x, 99 % of the excess removed - `explained`
     before. Far from the noise (EMPS: 25.8 x on the whole) the share still decides; a channel at 1.55 x (the most
     any right `explained` report of seeds 75-81 left) stays `explained`."""
-    from watflex_sim.diagnosis.validate import LONE_CHANNEL, NOISE_MARGIN, lone_channel, verdict_of, verdict_reason
+    from watflex_sim.diagnosis.validate import NOISE_MARGIN
+    from watflex_sim.diagnosis.verdict import LONE_CHANNEL, lone_channel, verdict_of, verdict_reason
 
     found = Model([{"effect": "backlash", "where": "hub", "width": 7.6e-5, "position": 0.0}])
     train = {"noise_ratio": 0.61, "worst_ratio": 2.20, "worst_channel": "motor_current"}
@@ -2496,13 +2499,13 @@ def test_in_a_round_for_local_windows_a_finding_must_remove_their_excess(monkeyp
 
 
 def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_noise(laser_recordings):
-    """refit.choose_fidelity: the laser arm simulated half as fine (6 segments at 0.2 ms for 11 at 0.1 ms) is within
+    """fidelity.choose_fidelity: the laser arm simulated half as fine (6 segments at 0.2 ms for 11 at 0.1 ms) is within
     COARSE_MARGIN (0.15) x the noise of its own (RMS) on every channel of two 2 s steps (measured 0.09 x; 0.04-0.07 x
     on seeds 65-66's 6 s recordings): every later simulation runs so, and one FINER x finer than that is the model's
     own again, sample for sample; a model with stick-slip there goes back to as fine (keep_fidelity). On 0.4 s steps the
     transient is most of the recording (0.20 x): as fine as the model. So is Watflex's 1 s elbow step, several times its
     noise off half as fine (0.5-7.5 x on 6 s recordings)."""
-    from watflex_sim.diagnosis.refit import COARSE_MARGIN, choose_fidelity, keep_fidelity
+    from watflex_sim.diagnosis.fidelity import COARSE_MARGIN, choose_fidelity, keep_fidelity
     from watflex_sim.diagnosis.runner import Runner
     from watflex_sim.diagnosis.screening import SCREEN_FINER
     from watflex_sim.diagnosis.uncertainty import FINER
@@ -2523,7 +2526,7 @@ def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_
         model_own = runner.simulate(Model(), finer=FINER)
         assert all(np.array_equal(a.channels[c], b.channels[c]) for a, b in zip(model_own, ours) for c in a.channels)
 
-        # refit.keep_fidelity: a smooth finding keeps the coarse model; stick-slip at the hub (the laser demo's gear
+        # fidelity.keep_fidelity: a smooth finding keeps the coarse model; stick-slip at the hub (the laser demo's gear
         # stiction) takes it beyond the margin, and the diagnosis goes back to the model's own for good
         payload = Model([{"effect": "payload", "where": "tip", "mass": 0.1}])
         assert keep_fidelity(data, runner, payload, runner.simulate(payload), lambda kind, message: None)
@@ -2544,35 +2547,36 @@ def test_the_diagnosis_simulates_half_as_fine_where_that_is_as_good_against_the_
 
 
 def test_a_round_whose_candidate_does_not_stand_the_coarse_model_is_fitted_as_fine(monkeypatch):
-    """refit.fine_for_round: on the laser arm simulated half as fine (choose_fidelity), a round whose fitted candidates
+    """fidelity.fine_for_round: on the laser arm simulated half as fine (choose_fidelity), a round whose fitted candidates
     are all smooth (a tip payload) stays coarse and untouched; one with a candidate that the coarse model misjudges
     (the demo's gear stick-slip, beyond COARSE_MARGIN x the noise from its own, as in keep_fidelity's test) goes to
     the model's own fidelity before the round chooses: every candidate carried on there (refine.carry_on, stubbed
     here: refine.carry_on_each) and the current model's simulations returned as fine, so the candidates' gains are against
     like."""
-    from watflex_sim.diagnosis import refit
+    from watflex_sim.diagnosis import fidelity
     from watflex_sim.diagnosis.effect_fit import scored
     from watflex_sim.diagnosis.runner import Runner
     from watflex_sim.diagnosis.screening import SCREEN_FINER
 
     carried = []
-    monkeypatch.setattr(refit, "carry_on_each", lambda data, runner, items: [
+    monkeypatch.setattr(fidelity, "carry_on_each", lambda data, runner, items: [
         carried.append(result) or {**result, "carried": True} for result, _ in items])
     steps = [simulate(load_scenario("laser_arm_step", [f"direction={d}", "duration_s=2.0", f"seed={i}"])).recording
              for i, d in enumerate(("positive", "negative"))]
     data = prepare(steps, ["a.csv", "b.csv"])
     quiet = lambda kind, message: None  # noqa: E731
     with Runner(data, 1) as runner:
-        sims, _ = refit.choose_fidelity(data, runner, runner.simulate(Model()), quiet)
+        sims, _ = fidelity.choose_fidelity(data, runner, runner.simulate(Model()), quiet)
         assert runner.fidelity == SCREEN_FINER
         payload = Model([{"effect": "payload", "where": "tip", "mass": 0.1}])
         smooth = [scored(data, {"model": payload, "effect": "payload", "where": "tip"}, runner.simulate(payload))]
-        assert refit.fine_for_round(data, runner, Model(), sims, smooth, quiet) == (smooth, sims)
+        assert fidelity.fine_for_round(data, runner, Model(), sims, smooth, quiet) == (smooth, sims)
         assert runner.fidelity == SCREEN_FINER and not carried
         stiction = Model([{"effect": "coulomb_friction", "where": "hub", "torque_positive": 2.778, "torque_negative": 0.926}])
         rough = smooth + [scored(data, {"model": stiction, "effect": "coulomb_friction", "where": "hub"}, runner.simulate(stiction))]
         said = []
-        out, now = refit.fine_for_round(data, runner, Model(), sims, rough, lambda kind, message: said.append(message))
+        out, now = fidelity.fine_for_round(data, runner, Model(), sims, rough,
+                                           lambda kind, message: said.append(message))
         assert runner.fidelity == 1.0 and "coulomb_friction at hub" in said[-1] and "from now on" in said[-1]
         assert [r["effect"] for r in carried] == ["payload", "coulomb_friction"] and all(r["carried"] for r in out)
         fine_stiction = runner.simulate(stiction)  # carried on from its simulations as fine, not the coarse ones
@@ -2581,9 +2585,9 @@ def test_a_round_whose_candidate_does_not_stand_the_coarse_model_is_fitted_as_fi
 
 
 def _refits_scored_by(monkeypatch, ratio_of):
-    """refine's refits stood in for: levenberg keeps its start, and a model's training and validation noise ratios are
+    """earlier's refits stood in for: levenberg keeps its start, and a model's training and validation noise ratios are
     both `ratio_of(model)` (the simulations' stand-in); returns a Runner class for swap_earlier."""
-    from watflex_sim.diagnosis import refine
+    from watflex_sim.diagnosis import earlier
 
     n_params = {"stribeck_friction": 3, "coulomb_friction": 2, "position_dependent_friction": 4, "actuator_gain": 1,
                 "actuator_offset": 1}
@@ -2592,14 +2596,15 @@ def _refits_scored_by(monkeypatch, ratio_of):
         def simulate(self, model):
             return ratio_of(model)
 
-    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
-    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
-    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: [])
-    monkeypatch.setattr(refine, "rig_slots", lambda data: [])
-    monkeypatch.setattr(refine, "parameter_count", lambda data, effect: n_params[effect["effect"]])
-    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
-    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
-                                                                      "held_out": {"noise_ratio": sims}})
+    monkeypatch.setattr(earlier, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
+    monkeypatch.setattr(earlier, "in_noise", lambda data, runner: None)
+    monkeypatch.setattr(earlier, "effect_slots_of", lambda data, model: [])
+    monkeypatch.setattr(earlier, "rig_slots", lambda data: [])
+    monkeypatch.setattr(earlier, "parameter_count", lambda data, effect: n_params[effect["effect"]])
+    monkeypatch.setattr(earlier, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
+    monkeypatch.setattr(earlier, "scored", lambda data, result, sims: {**result, "sims": sims,
+                                                                        "train": {"noise_ratio": sims},
+                                                                        "held_out": {"noise_ratio": sims}})
     return Runner
 
 
@@ -2617,24 +2622,24 @@ def test_an_earlier_finding_is_replaced_by_its_runner_up_once_the_later_ones_are
     and validation falls, MIN_GAIN = 0.02 per parameter). Noise ratios here are set per set of effects: without
     the friction 5.5 x; Stribeck (3 parameters) 0.77 x: score 2 (5.5 - 0.77) / 5.5 - 0.06 = 1.660; Coulomb
     (2 parameters) 0.75 x: 1.687, taken; at 0.95 x: 1.615, not taken; a position-dependent friction at 0.90 x: 1.593."""
-    from watflex_sim.diagnosis import refine
+    from watflex_sim.diagnosis import earlier
 
     ratio = {("actuator_gain",): 5.5, ("actuator_gain", "stribeck_friction"): 0.77,
              ("actuator_gain", "coulomb_friction"): 0.75, ("actuator_gain", "position_dependent_friction"): 0.90}
     Runner = _refits_scored_by(monkeypatch, lambda model: ratio[tuple(sorted(e["effect"] for e in model.effects))])
     gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 1.118}
-    current = refine.scored(None, {"model": Model([{"effect": "stribeck_friction", "where": "hub"}, gain])}, 0.77)
+    current = earlier.scored(None, {"model": Model([{"effect": "stribeck_friction", "where": "hub"}, gain])}, 0.77)
     round_1 = (_fitted("stribeck_friction", 1.83, 1.187), [_fitted("coulomb_friction", 2.19, 1.0),
                                                            _fitted("position_dependent_friction", 2.26, 1.18),
                                                            _fitted("viscous_friction", 3.0, 0.9)])  # 3.0 > 1.5 x 1.83
-    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    out, tried = earlier.swap_earlier(None, Runner(), current, [round_1], 1e-3)
     assert [e["effect"] for e in out["model"].effects] == ["actuator_gain", "coulomb_friction"]
     assert out["score"] == pytest.approx(2 * (5.5 - 0.75) / 5.5 - 0.04)
     assert [(a["effect"], b["effect"]) for a, b in tried] == [("position_dependent_friction", "stribeck_friction"),
                                                               ("stribeck_friction", "coulomb_friction")]
     assert tried[1][0]["model"].effects[-1]["effect"] == "stribeck_friction"  # the one replaced, last: alternative_entry
     ratio[("actuator_gain", "coulomb_friction")] = 0.95
-    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    out, tried = earlier.swap_earlier(None, Runner(), current, [round_1], 1e-3)
     assert out is current and [a["effect"] for a, _ in tried] == ["position_dependent_friction", "coulomb_friction"]
 
 
@@ -2646,7 +2651,7 @@ def test_a_ripple_runner_up_is_fitted_anew_beside_the_later_findings(monkeypatch
     place 0.77 x. Stand-ins: the gain alone 16 x; a ripple scores by its period. A ripple runner-up is also fitted anew
     (`anew`, once a place though the round fitted it twice) and refit from there; the better is taken: score
     2 (16 - 0.77) / 16 - 0.08 = 1.824 against the offset's 2 (16 - 1.43) / 16 - 0.02 = 1.801. Without `anew`, not."""
-    from watflex_sim.diagnosis import refine
+    from watflex_sim.diagnosis import earlier
 
     def ratio_of(model):
         effects = {e["effect"]: e for e in model.effects}
@@ -2657,11 +2662,11 @@ def test_a_ripple_runner_up_is_fitted_anew_beside_the_later_findings(monkeypatch
     Runner = _refits_scored_by(monkeypatch, ratio_of)
     gain = {"effect": "actuator_gain", "where": "voltage_cmd", "ratio": 0.735}
     offset = {"effect": "actuator_offset", "where": "voltage_cmd", "offset": 0.0215}
-    current = refine.scored(None, {"model": Model([offset, gain])}, 1.43)
+    current = earlier.scored(None, {"model": Model([offset, gain])}, 1.43)
     ripples = [_fitted("position_dependent_friction", 9.95, 0.92, period=0.0104, amplitude=0.37),
                _fitted("position_dependent_friction", 9.69, 0.81, period=0.001, amplitude=0.28)]
     round_1 = (_fitted("actuator_offset", 9.91, 0.93, where="voltage_cmd", offset=0.029), ripples)
-    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3)
+    out, tried = earlier.swap_earlier(None, Runner(), current, [round_1], 1e-3)
     assert out is current and len(tried) == 2  # from round 1's fits: 2.95 x, not taken
     calls = []
 
@@ -2669,22 +2674,22 @@ def test_a_ripple_runner_up_is_fitted_anew_beside_the_later_findings(monkeypatch
         calls.append((effect, where, tuple(e["effect"] for e in base.effects)))
         return Model(base.effects + [{"effect": effect, "where": where, "period": 0.039, "amplitude": -0.083}])
 
-    out, tried = refine.swap_earlier(None, Runner(), current, [round_1], 1e-3, anew)
+    out, tried = earlier.swap_earlier(None, Runner(), current, [round_1], 1e-3, anew)
     assert [e["effect"] for e in out["model"].effects] == ["actuator_gain", "position_dependent_friction"]
     assert out["model"].effects[-1]["period"] == 0.039 and out["score"] == pytest.approx(2 * (16 - 0.77) / 16 - 0.08)
     assert calls == [("position_dependent_friction", "hub", ("actuator_gain",))]
 
 
 def test_a_hunting_loop_raises_the_noise_floor_it_is_judged_by():
-    """refit.raise_noise_floor: the floor (what the rig's noise leaves in closed loop, what a finer step changes) is
+    """floors.raise_noise_floor: the floor (what the rig's noise leaves in closed loop, what a finer step changes) is
     measured again with the findings in. A hub backlash of 1.2e-4 rad in the laser arm's tip loop makes the loop hunt,
     and the recordings' own noise then moves the tip far more than with the nominal model (measured on 2 s steps:
     tip sensor 0.0103 -> 0.0410 V, x4.0; seed 75's laser_arm-214f6418, 6 s: x12); the nominal model, measured again,
-    raises nothing. refit.floors_after_dropping: once elimination drops the backlash, the floors are the nominal
+    raises nothing. floors.floors_after_dropping: once elimination drops the backlash, the floors are the nominal
     model's again (every FLOORS field), and with it kept they are raised again to the same values (NOISE_SEED)."""
     from copy import deepcopy
 
-    from watflex_sim.diagnosis.refit import FLOORS, calibrate_noise, floors_after_dropping, raise_noise_floor
+    from watflex_sim.diagnosis.floors import FLOORS, calibrate_noise, floors_after_dropping, raise_noise_floor
     from watflex_sim.diagnosis.runner import Runner
 
     backlash = {"effect": "backlash", "where": "hub", "width": 1.2e-4}  # rad
@@ -2786,7 +2791,7 @@ def test_two_friction_laws_at_one_joint_give_way_to_one_that_scores_better(monke
     sliding curve (a position-dependent friction beside a viscous one, seed 79's true pair) are left alone."""
     from types import SimpleNamespace
 
-    from watflex_sim.diagnosis import laws, refine
+    from watflex_sim.diagnosis import earlier, laws
 
     ratio = {(): 2.56, ("coulomb_friction", "viscous_friction"): 0.755, ("stribeck_friction",): 0.757}
 
@@ -2794,21 +2799,22 @@ def test_two_friction_laws_at_one_joint_give_way_to_one_that_scores_better(monke
         def simulate(self, model):
             return ratio.get(tuple(sorted(e["effect"] for e in model.effects)), 3.0)  # stands for the simulations
 
-    monkeypatch.setattr(refine, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
-    monkeypatch.setattr(refine, "in_noise", lambda data, runner: None)
-    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: [])
-    monkeypatch.setattr(refine, "rig_slots", lambda data: [])
-    for module in (laws, refine):
+    monkeypatch.setattr(earlier, "levenberg", lambda evaluate, model, free, x0, J, iters: (model, 0.0, None))
+    monkeypatch.setattr(earlier, "in_noise", lambda data, runner: None)
+    monkeypatch.setattr(earlier, "effect_slots_of", lambda data, model: [])
+    monkeypatch.setattr(earlier, "rig_slots", lambda data: [])
+    for module in (laws, earlier):
         monkeypatch.setattr(module, "parameter_count", lambda data, effect: {"stribeck_friction": 3}.get(effect["effect"], 2))
-    monkeypatch.setattr(refine, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
-    monkeypatch.setattr(refine, "scored", lambda data, result, sims: {**result, "sims": sims, "train": {"noise_ratio": sims},
-                                                                      "held_out": {"noise_ratio": sims}})
+    monkeypatch.setattr(earlier, "fit_scores", lambda data, sims, part: {"noise_ratio": sims})
+    monkeypatch.setattr(earlier, "scored", lambda data, result, sims: {**result, "sims": sims,
+                                                                        "train": {"noise_ratio": sims},
+                                                                        "held_out": {"noise_ratio": sims}})
     monkeypatch.setattr(laws, "joint_speeds", lambda data, sims, joint: np.zeros(0))
     monkeypatch.setattr(laws, "curve_start", lambda data, model, rest, law, joint, speeds: {"effect": law, "where": joint})
     places = {law: ["hub"] for law in ("coulomb_friction", "stribeck_friction", "viscous_friction", "position_dependent_friction")}
     data = SimpleNamespace(rig=SimpleNamespace(effects=places))
     pair = [{"effect": "coulomb_friction", "where": "hub"}, {"effect": "viscous_friction", "where": "hub"}]
-    current = refine.scored(None, {"model": Model(pair)}, 0.755)
+    current = earlier.scored(None, {"model": Model(pair)}, 0.755)
     out, tried = laws.one_law(data, Runner(), current, 1e-3)
     assert [e["effect"] for e in out["model"].effects] == ["stribeck_friction"]
     assert out["score"] == pytest.approx(2 * (2.56 - 0.757) / 2.56 - 0.06)
@@ -2818,19 +2824,20 @@ def test_two_friction_laws_at_one_joint_give_way_to_one_that_scores_better(monke
     ratio[("stribeck_friction",)] = 0.80
     out, tried = laws.one_law(data, Runner(), current, 1e-3)
     assert out is current and [t[0]["effect"] for t in tried] == ["stribeck_friction"]
-    ripple = refine.scored(None, {"model": Model([pair[1], {"effect": "position_dependent_friction", "where": "hub"}])}, 0.7)
+    ripple = earlier.scored(None, {"model": Model([pair[1], {"effect": "position_dependent_friction", "where": "hub"}])},
+                            0.7)
     assert laws.one_law(data, Runner(), ripple, 1e-3) == (ripple, [])
 
 
 def test_an_earlier_finding_s_size_is_restarted_a_decade_away_beside_a_later_candidate_that_falls_just_short(monkeypatch):
-    """refine.restart_earlier and validate.near_place: seed 80's laser_arm-a66d52a5 (hub Stribeck friction beside a
+    """earlier.restart_earlier and validate.near_place: seed 80's laser_arm-a66d52a5 (hub Stribeck friction beside a
     4.6e-5 rad backlash: each alone fits worse than neither, 5.00 x and 5.22 x against 4.75 x, both 2.00 x): the
     backlash found first at 4.24e-6 rad, the Stribeck fitted beside it removed 16 % of validation's excess where a later
     finding must remove 25 % (MIN_EXCESS_GAIN): within NEAR_SHARE (half) of it, so the Stribeck is fitted again with
     the earlier finding's log-scaled width restarted 10 x and 0.1 x from 4.24e-6 (its position, linear, is not) and the
     best-scored fit is returned (measured on the case: from 4.24e-5, backlash 4.63e-5 and Stribeck 0.0539 / 0.0611 N m,
     v_s 0.0144 rad/s, validation 0.53 x the noise, `explained`)."""
-    from watflex_sim.diagnosis import refine
+    from watflex_sim.diagnosis import earlier
     from watflex_sim.diagnosis.validate import MIN_EXCESS_GAIN, NEAR_SHARE, near_place
 
     assert NEAR_SHARE * MIN_EXCESS_GAIN == pytest.approx(0.125)
@@ -2840,7 +2847,7 @@ def test_an_earlier_finding_s_size_is_restarted_a_decade_away_beside_a_later_can
     assert not near_place({**short, "excess_gain": 0.30}, later=True)  # earns its place: nothing to restart
 
     slots = [Slot(("effect", 0, "width"), 1e-7, 1e-4, True), Slot(("effect", 0, "position"), -1.0, 1.0, False)]
-    monkeypatch.setattr(refine, "effect_slots_of", lambda data, model: slots)
+    monkeypatch.setattr(earlier, "effect_slots_of", lambda data, model: slots)
     tried = []
 
     def fit(base):  # the round's candidate fit on top of `base`, judged: the truth's width scores best
@@ -2849,11 +2856,11 @@ def test_an_earlier_finding_s_size_is_restarted_a_decade_away_beside_a_later_can
         return [{"model": base, "score": -abs(math.log10(width / 4.6e-5))}]
 
     current = Model([{"effect": "backlash", "where": "hub", "width": 4.24e-6, "position": 0.1745}])
-    best = refine.restart_earlier(None, current, fit)
+    best = earlier.restart_earlier(None, current, fit)
     assert [(pytest.approx(w), p) for w, p in tried] == [(4.24e-5, 0.1745), (4.24e-7, 0.1745)]
     assert best["model"].effects[0]["width"] == pytest.approx(4.24e-5)
     tried.clear()
-    refine.restart_earlier(None, Model([{**current.effects[0], "width": 2e-5}]), fit)
+    earlier.restart_earlier(None, Model([{**current.effects[0], "width": 2e-5}]), fit)
     assert tried[0][0] == 1e-4  # clamped to the slot's bound
 
 

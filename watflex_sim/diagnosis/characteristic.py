@@ -3,7 +3,7 @@
 Contract: `curved_channels(data, sims)` lists the channels whose residual (measured - simulated, in noise units) a
 cubic map of the simulated value takes beyond a gain and an offset, significantly (`effective_samples`: how many
 independent samples a residual is worth) and by a large share of what the line leaves above the noise: what a sensor
-or an amplifier with a nonlinear characteristic leaves, which no catalogue effect makes, so `validate.verdict_of`
+or an amplifier with a nonlinear characteristic leaves, which no catalogue effect makes, so `verdict.verdict_of`
 calls such a case `unexplained`.
 """
 from __future__ import annotations

@@ -12,7 +12,6 @@ noise allows).
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +20,7 @@ from ..model import ConfigError
 from ..recording import Recording
 from ..rigdesc import RigDescription, load_rig
 from .glitch import without_glitches, without_held
-from .noise import PLATEAU, coloured_noise, measured_noise, quantised, visible_noise
+from .noise import measured_noise, quantised, visible_noise
 
 FIT_SECONDS = 30.0  # s: at most this much of each recording trains the fits; the rest only validates
 BLOCKS_PER_RECORDING = 60  # blocks per recording, in pairs of one training and one validation block (split_blocks):
@@ -66,13 +65,14 @@ class Data:
     how: str = ""
     idle: frozenset = frozenset()  # rig parameters these recordings do not depend on (not refit)
     discretisation: list[dict[str, float]] = field(default_factory=list)  # per recording: channel -> the
-    # simulator's own discretisation error (its unit), part of `noise` (add_discretisation_error)
+    # simulator's own discretisation error (its unit), part of `noise` (floors.add_discretisation_error)
     sensor_noise: list[dict[str, float]] = field(default_factory=list)  # per recording: channel -> the noise
     # the recording shows (declared or measured, its unit): `noise` before the closed-loop and discretisation parts
     closed_loop_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what the
-    # rig's noise leaves in closed loop, squared, per sample (its unit^2; add_closed_loop_noise)
+    # rig's noise leaves in closed loop, squared, per sample (its unit^2; floors.add_closed_loop_noise)
     discretisation_sq: list[dict[str, np.ndarray]] = field(default_factory=list)  # per recording: channel -> what a
-    # finer discretisation changes, squared, per sample (its unit^2; add_discretisation_error): locate.local_excess
+    # finer discretisation changes, squared, per sample (its unit^2; floors.add_discretisation_error):
+    # locate.local_excess
     motion_memo: list | None = None  # `motions`' answer, once asked
     effort_memo: float | None = None  # motion.simulated_effort's answer, once asked
     glitches: list[str] = field(default_factory=list)  # "file (channel samples, ...)": a logger's glitches left out
@@ -216,75 +216,6 @@ def prepare(recordings: list[Recording], names: list[str]) -> Data:
         how += f"; samples far off their neighbours' line left out (a logger's glitches): {', '.join(glitched)}"
     return Data(cleaned, names, rig, channels, scale, noise, train, how, sensor_noise=[dict(n) for n in noise],
                 glitches=glitched, held=held)
-
-
-def add_coloured_noise(data: Data, sims: list[Recording]) -> list[str]:
-    """Raise each measured channel's noise, and its `sensor_noise`, to the coloured_noise of its residual against
-    `sims` (a model, noise off) where that is more than PLATEAU x larger (what the estimates scatter by): the
-    recording's noise measured where the model has taken the motion away. prepare's estimate reads noise correlated
-    over a few samples (a real sensor's filter) as less than it is, and nothing in the catalogue is made of that
-    shortfall. Commands are left to add_closed_loop_noise (the controller's answer to the noise), quantised channels
-    (QUANTUM_SHARE) to measured_noise. Returns "recording: channel xfactor" of each raised."""
-    data.sensor_noise = [dict(n) for n in data.sensor_noise]  # raise_noise_floor's scratch shares the list
-    measured, raised = set(data.rig.of_kind("measured")), []
-    for i, (rec, sim) in enumerate(zip(data.recordings, sims)):
-        for c in (c for c in data.channels[i] if c in measured):
-            residual = np.asarray(sim.channels[c]) - np.asarray(rec.channels[c])
-            finite = np.isfinite(residual)  # a slower sensor's samples (the 25 Hz camera) are its own spacing apart
-            if finite.sum() < 3:
-                continue
-            noise = coloured_noise(residual[finite], float(np.median(np.diff(rec.time[finite]))))
-            if (noise > PLATEAU * data.sensor_noise[i][c]  # then whether quantised: the step's rms error, its unit
-                    and not quantised(rec.channels[c], noise)):
-                raised.append(f"{data.names[i]}: {c} x{noise / data.sensor_noise[i][c]:.2f}")
-                data.sensor_noise[i][c] = noise
-                data.noise[i][c] = max(data.noise[i][c], noise)
-    return raised
-
-
-def add_closed_loop_noise(data: Data, clean: list[Recording], noisy: list[Recording]) -> None:
-    """Raise each channel's noise to what the rig's measurement noise alone leaves in closed loop: the
-    RMS difference between the model simulated with its noise on and off. Fed back through the
-    controller, sensor noise moves the rig itself (with stick-slip, where a joint comes to rest), so a
-    perfect model is off by more than the sensor noise; open loop, this is the sensor noise. The rig
-    description's noise model is checked against the recording: where the simulated channel jitters
-    more than the recorded one (its measured_noise), the floor is scaled down by that ratio (a white
-    noise declared on an encoder that is really quantised would otherwise pass through a velocity loop
-    as volts of jitter the recording does not have, and hide real misfits). Kept per sample too
-    (`data.closed_loop_sq`, scaled alike)."""
-    data.closed_loop_sq = [{} for _ in data.recordings]
-    for i, (rec, a, b) in enumerate(zip(data.recordings, clean, noisy)):
-        for c in data.channels[i]:
-            every = np.asarray(b.channels[c]) - np.asarray(a.channels[c])
-            d = every[np.isfinite(every)]
-            if d.size:
-                simulated, recorded = measured_noise(np.asarray(b.channels[c])), measured_noise(rec.channels[c])
-                scale = min(1.0, recorded / simulated) if simulated > 0 else 1.0
-                data.closed_loop_sq[i][c] = np.nan_to_num(scale * every) ** 2
-                data.noise[i][c] = max(data.noise[i][c], scale * float(np.sqrt(np.mean(d**2))))
-
-
-def add_discretisation_error(data: Data, ours: list[Recording], finer: list[Recording]) -> None:
-    """Raise each channel's noise floor by what the simulator's own discretisation leaves: the RMS
-    difference between the model simulated as it is and `finer` (resim.finer_discretisation), added in
-    quadrature (independent of the measurement noise). Another implementation of the same datasheet
-    differs from ours by at least our own discretisation error, and a real rig by that and more: no
-    finding should be made of it. Measured on 6 s Watflex elbow steps (12 segments at 0.5 ms): against
-    twice as fine, strain_2A 3.1-3.4 x its noise, the elbow encoder 3.0 x (the 0.1 rad staircase: 0.9 x and
-    1.7 x); against four times as fine 4.0-4.2 x and 3.6-4.8 x (so a factor 2 is a lower bound); laser arm
-    0.02-0.06 x. The added part is kept per recording and channel in `data.discretisation` (the report's
-    noise table), and per sample, squared, in `data.discretisation_sq`."""
-    data.discretisation = [{} for _ in data.recordings]
-    data.discretisation_sq = [{} for _ in data.recordings]
-    for i, (a, b) in enumerate(zip(ours, finer)):
-        for c in data.channels[i]:
-            every = np.asarray(b.channels[c]) - np.asarray(a.channels[c])
-            d = every[np.isfinite(every)]
-            if d.size:
-                error = float(np.sqrt(np.mean(d**2)))
-                data.discretisation[i][c] = error
-                data.discretisation_sq[i][c] = np.nan_to_num(every) ** 2
-                data.noise[i][c] = math.hypot(data.noise[i][c], error)
 
 
 def in_part(train: np.ndarray, part: str) -> np.ndarray:

@@ -7,7 +7,7 @@ carries, in more than half their recordings,
   the model does not have;
 - a drift (`steady_drifts`): a trend in time, at the same rate in each half of the recording, through motion and rest
   alike: a sensor or amplifier drifting (thermal), which a sensor offset only halves.
-No catalogue effect makes either, so `validate.verdict_of` calls such a case `unexplained`.
+No catalogue effect makes either, so `verdict.verdict_of` calls such a case `unexplained`.
 
 Measured on the final models of seeds 86-88 (44 cases) and the off-catalogue probes of docs/diagnosis.md (a 50 Hz hum
 of 5 x the noise and a drift of 0 -> 10 x the noise over 6 s, each added to a laser tip sensor and to a Watflex strain

@@ -149,7 +149,6 @@ def jacobian(evaluate, base: Model, free: list[Slot], u: np.ndarray, r: np.ndarr
 
 T_REPLICATES = 2.36  # Student's t, 95 %, 7 degrees of freedom: the interval from 8 noise replicates' scatter
 HUBER = 1.345  # x the residual's robust spread: beyond it a residual counts linearly (Huber's M-estimate)
-COMPASS_GAIN = 1e-3  # a pattern-search move must lower the cost by this share of it
 
 
 def huber_threshold(r: np.ndarray) -> float:
@@ -216,51 +215,6 @@ def levenberg(evaluate, base: Model, free: list[Slot], x0, J: np.ndarray | None 
         else:
             lam *= 5
     return model, cost, J
-
-
-def compass(evaluate, base: Model, free: list[Slot], x0, r0: np.ndarray, sweeps: int = 6,
-            first_step: float = 0.25, resolution: float | None = None, enough=None) -> Model:
-    """Compass (pattern) search on the training cost from x0, for a cost that stick-slip makes rough:
-    each sweep simulates every slot one step up and one down (2 x len(free) models, in parallel) and
-    moves to the best if it lowers Huber's cost by COMPASS_GAIN of it; a sweep that finds nothing halves
-    the steps, which start at `first_step` x each slot's span. Levenberg-Marquardt's local model can
-    stall there (a few 0.1 % of inertia decide where a stick-slipping joint stops). At most `sweeps`
-    sweeps; with a `resolution` (a cost change the data cannot resolve: 0.5 for a residual in noise
-    units, one unit of chi-square) it stops earlier, once no step changes the cost by that much or by
-    what a move must gain: smaller steps would change it less still (far from the noise, where missing
-    physics holds the cost up, the 0.1 % decides: a laser arm with its actuator gain x1.1 searched 11
-    sweeps, 231 simulations, for a 0.3 % lower cost found in the first two); a slot at its bound, which
-    steps one way only, does not hold it. With `enough(model)` it stops at the first move to a model for
-    which that holds (and returns that very object)."""
-    u, lo, hi = internal_start(free, x0)
-    k = huber_threshold(r0)
-    cost, step = huber_cost(r0, k), first_step * (hi - lo)
-    for _ in range(sweeps):
-        trials, both_ways = [], []
-        for i in range(len(free)):
-            moves = []
-            for sign in (1.0, -1.0):
-                v = u.copy()
-                v[i] = np.clip(v[i] + sign * step[i], lo[i], hi[i])
-                if v[i] != u[i]:
-                    moves.append(v)
-            trials += moves
-            both_ways += [len(moves) == 2] * len(moves)
-        costs = [math.inf if r is None else huber_cost(r, k)
-                 for r in evaluate([at_internal(v, free, base) for v in trials])]
-        best = int(np.argmin(costs)) if costs else -1
-        # a slot at a bound steps one way only: its cost changes in proportion to the step, to first order,
-        # so a step that gained too little, or lost, does no better shorter; it does not hold the search
-        moving = max((abs(c - cost) for c, two in zip(costs, both_ways) if two), default=0.0)
-        if best >= 0 and costs[best] < cost * (1 - COMPASS_GAIN):
-            u, cost = trials[best], costs[best]
-            if enough is not None and enough(moved := at_internal(u, free, base)):
-                return moved
-        elif resolution is not None and moving < max(resolution, COMPASS_GAIN * cost):
-            break
-        else:
-            step = step / 2
-    return at_internal(u, free, base)
 
 
 def refit_parameters(data: Data, base: Model, runner=None, J: np.ndarray | None = None, iters: int = 4) -> Model:

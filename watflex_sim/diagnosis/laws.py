@@ -17,8 +17,9 @@ from ..joint_friction import patched, scenario_frictions
 from ..recording import Recording
 from ..resim import scenario_from_recording
 from .data import Data, Model
+from .earlier import refit_in_place, scores_without
+from .fitting import parameter_count
 from .motion import motions
-from .refine import parameter_count, refit_in_place, scores_without
 from .runner import Runner
 from .screening import CURVE_LAWS, make_candidate
 from .validate import gains
@@ -38,7 +39,7 @@ def one_law(data: Data, runner: Runner, current: dict, margin: float) -> tuple[d
     spent its time at; the Stribeck law alone was fitted only beside the Coulomb friction. Each other law the rig
     allows at the joint is started where its sliding curve best matches the pair's over the joint's simulated speeds
     (least squares, `curve_start`), then it and the rig's parameters are refit in the pair's place
-    (refine.refit_in_place, as swap_earlier) and both are scored by validate.gains against the model without the
+    (earlier.refit_in_place, as swap_earlier) and both are scored by validate.gains against the model without the
     pair; the single law is kept when it scores better by `margin` (the score charges each parameter: one law has
     fewer). Returns the current result and (tried, chosen, the number of effects before the tried one's) for the
     report's alternatives."""

@@ -100,7 +100,7 @@ def _local_width(rec: Recording) -> int:
 def local_null(data: Data, i: int, channel: str, width: int) -> np.ndarray:
     """Per sample of recording i, the variance (unit^2) a model with nothing missing leaves on `channel` over a
     window of `width` samples: the sensor noise or, where larger, what the rig's noise leaves in closed loop there,
-    plus DISCRETISATION_COUNT^2 x what a finer discretisation changes there (both from refit.calibrate_noise; the
+    plus DISCRETISATION_COUNT^2 x what a finer discretisation changes there (both from floors.calibrate_noise; the
     whole recording's noise spreads them evenly, but they gather at transients). The discretisation change counts
     twice: against twice as fine is a lower bound of our own error (4 x finer: 1.3 x more), and recordings
     from another implementation of the datasheet carry that one's own."""

@@ -5,11 +5,11 @@ plotting). Stages: re-simulate with the nominal model; refit the rig's parameter
 (kept only if validation does not get worse); locate; rounds of screening, candidate fits (in the first round also
 the one the screening puts first against the nominal model's residual: what the refit took up) and a polish
 of the best, each kept only if its *final* model improves training by MIN_GAIN per parameter and
-validation by MIN_HELD_GAIN, the noise floor then measured again with it in (refit.raise_noise_floor: a loop that
+validation by MIN_HELD_GAIN, the noise floor then measured again with it in (floors.raise_noise_floor: a loop that
 hunts leaves more to noise than the nominal one; measured again without the findings elimination drops); a later
 candidate short only of the excess it must remove fitted again with the earlier findings' sizes restarted
-(refine.restart_earlier: two effects that each fit worse alone than neither); each
-earlier round's runners-up refit in its winner's place beside the later findings (refine.swap_earlier: a round chose
+(earlier.restart_earlier: two effects that each fit worse alone than neither); each
+earlier round's runners-up refit in its winner's place beside the later findings (earlier.swap_earlier: a round chose
 with the later effects missing), and one friction law in the place of two found at one joint (laws.one_law); where no
 finding is left, the rig's parameters refit in the floors' units (refit.without_findings); the findings settled
 (settle.settle: backward elimination, the final refit, 95 % intervals, vague findings dropped); alternatives within
@@ -30,15 +30,16 @@ from ..recording import Recording
 from .characteristic import curved_channels
 from .data import Data, Model, prepare, residual_vector, unit_change
 from .disturbance import disturbances
+from .earlier import restart_earlier, swap_earlier
 from .effect_fit import FIT_ITERATIONS, fit_candidates, scored
 from .explain import canonical_form, finding
+from .fidelity import fine_for_round, keep_fidelity
 from .fitting import value_of
+from .floors import FLOORS, calibrate_noise, raise_noise_floor
 from .laws import one_law
 from .locate import LOCAL_WINDOW_S, local_excess, local_gain, locate
-from .refine import (alternative_entry, carry_on, inside_catalogue, offset_alternative, polish, restart_earlier,
-                     single_from_pair, swap_earlier)
-from .refit import (FLOORS, calibrate_noise, fine_for_round, keep_fidelity, raise_noise_floor, refit_nominal,
-                    without_findings)
+from .refine import alternative_entry, carry_on, inside_catalogue, offset_alternative, polish, single_from_pair
+from .refit import refit_nominal, without_findings
 from .rescreen import RESCREEN, rescreen
 from .runner import Runner, evaluator, in_units
 from .scores import fit_scores, noise_nrmse, noise_table, step
@@ -46,8 +47,9 @@ from .screening import candidates, concealed, make_candidate, screen, signatures
 from .selection import LEADER_FIRST, SCREEN_TOP, leader_first, shortlist
 from .settle import settle
 from .tolerance import at_bounds, beyond_tolerance
-from .validate import (NOISE_MARGIN, earns_place, explained_share, far_gain, gains, near_place, rival,
-                       shortfall, told_apart, verdict_of, verdict_reason, within_noise)
+from .validate import (NOISE_MARGIN, earns_place, explained_share, far_gain, gains, near_place, rival, shortfall,
+                       told_apart, within_noise)
+from .verdict import verdict_of, verdict_reason
 
 PAIR_MARGIN = 1e-3  # symmetric friction + an actuator offset replaces one asymmetric friction only when it
 # scores better by this much (one effect before two on a tie; the pair is then listed as an alternative)
@@ -112,7 +114,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
     rejected, screened_report, fitted_report, alternatives, rounds = [], [], [], [], []
     round_ = 0
     bounds_tried = False  # a round for rig parameters at their tolerance bounds (beyond_tolerance) runs once
-    limited = None  # max_effects where the search stopped at it (validate.verdict_reason)
+    limited = None  # max_effects where the search stopped at it (verdict.verdict_reason)
     round_models = {}  # each round's chosen model, fitted on the training blocks, by its effects' places
     shortlisted = {}  # (effect, place) -> its candidate in the latest round that fitted it
     local, local_tried = [], False  # windows far above their local null (locate.local_excess) where the refit model is
@@ -267,7 +269,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         mismatch = locate(data, sims) or mismatch
     else:  # the loop ran to the limit: whether a further effect would earn its place was never asked
         limited = max_effects
-    if len(rounds) > 1:  # an earlier round's choice, with the later findings in (refine.swap_earlier)
+    if len(rounds) > 1:  # an earlier round's choice, with the later findings in (earlier.swap_earlier)
         say("swap", "refitting each earlier finding's runners-up in its place beside the later findings")
         def anew(base: Model, effect: str, where: str) -> Model | None:
             """The round's candidate fitted anew on `base` (a ripple's period scanned again; of its fits the one that

@@ -1,51 +1,38 @@
-"""Re-simulation and refit: the nominal model on the recordings, the rig's parameters refit within their
-tolerances, and what noise and our own discretisation leave.
+"""Re-simulation and refit: the nominal model on the recordings and the rig's parameters refit within their
+tolerances; a chosen model's parameters refit on all the data.
 
 Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), sets the fidelity every
-later simulation runs at (`choose_fidelity`: half as fine where that is as good against the noise; `keep_fidelity`
-goes back to as fine once a model with effects is not, `fine_for_round` once a round's candidate is not), refits the rig's
-parameters within tolerance in noise units (Levenberg-Marquardt, then a pattern search where the refit
-is near the noise but short of it, until training and validation are within it) and keeps the refit only
-if validation is no worse; it returns the nominal and refit models' simulations, the rig's live slots and
-their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in `data.idle`;
-noise correlated over a few samples (data.add_coloured_noise) raises the floors from the nominal model's residual
-before the refit. `calibrate_noise` adds to `data` that noise again on the refit's residual, what the rig's noise
-leaves in closed loop and what a finer discretisation changes; `raise_noise_floor` measures them again with a
-model's findings in and raises the floors they exceed. `final_refit` refits a chosen model's parameters on all the
-data (again from a point further along a shape or quantised parameter where a profile there costs less:
+later simulation runs at (fidelity.choose_fidelity), refits the rig's parameters within tolerance in noise units
+(Levenberg-Marquardt, then a pattern search where the refit is near the noise but short of it, until training and
+validation are within it) and keeps the refit only if validation is no worse; it returns the nominal and refit
+models' simulations, the rig's live slots and their Jacobian columns (spread units, for the screening and the fits),
+and marks idle parameters in `data.idle`; noise correlated over a few samples (floors.raise_coloured_noise) raises
+the floors from the nominal model's residual before the refit. `final_refit` refits a chosen model's parameters on
+all the data (again from a point further along a shape or quantised parameter where a profile there costs less:
 level.level_start, level.fine_start) and returns it with its simulations and its counterpart fitted on the training
-blocks.
+blocks; `levels_on_training` searches a finding's step or shape again on the training blocks, `refit_on_training`
+and `without_findings` refit a model, or what is left of it, there.
 """
 from __future__ import annotations
 
-from copy import deepcopy
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..model import ConfigError
 from ..recording import Recording
-from .data import (Data, Model, add_closed_loop_noise, add_coloured_noise, add_discretisation_error, residual_vector,
-                   unit_change)
-from .effect_fit import scored
+from .data import Data, Model, residual_vector, unit_change
+from .fidelity import choose_fidelity
 from .fitting import Slot, effect_slots_of, jacobian, levenberg, rig_slots, value_of
+from .floors import raise_coloured_noise
 from .level import fine_start, level_start, levels
 from .pattern import compass_worth, pattern_search
-from .refine import POLISH_ITERATIONS, carry_on_each, in_noise
+from .refine import POLISH_ITERATIONS, in_noise
 from .runner import Runner, evaluator, in_units
-from .scores import channel_ratios, fit_scores
-from .screening import SCREEN_FINER
-from .uncertainty import FINER, NOISE_SEED
+from .scores import fit_scores
 from .validate import within_noise
 
 REFIT_ITERATIONS = 8
-RAISED = 1.1  # raise_noise_floor raises a channel's floor measured again with the findings only beyond this factor
-# (a noise ratio 10 % lower: within what the floor's own estimate moves by, and the rest of the diagnosis unchanged)
-COARSE_MARGIN = 0.15  # x the noise: the whole diagnosis simulates SCREEN_FINER x as fine as the rig's model where the
-# nominal model so simulated is within this of the model's own (RMS) on every channel of every recording: it adds at
-# most 2 % to a channel's noise variance, and the 2 x finer comparison (calibrate_noise) then counts it. Measured:
-# the laser arm 0.04-0.07 x (6 segments at 0.2 ms for 11 at 0.1 ms, half the cost), Watflex 0.5-7.5 x (seeds 65-66)
-
 
 
 @dataclass
@@ -102,157 +89,6 @@ def refit_nominal(data: Data, runner: Runner, say) -> Refit:
     if sims is None or fit_scores(data, sims, "held_out")["noise_ratio"] > fit_scores(data, sims_nominal, "held_out")["noise_ratio"]:
         current, sims = nominal, sims_nominal  # a refit must earn its place on validation data too
     return Refit(sims_nominal, current, sims, free, rig_columns, coarse_error)
-
-
-def choose_fidelity(data: Data, runner: Runner, sims: list[Recording], say) -> tuple[list[Recording], float | None]:
-    """Simulate the nominal model SCREEN_FINER x as fine as the rig's (`sims`: as fine) and, where it is within
-    COARSE_MARGIN x the noise of `sims` (RMS) on every channel of every recording, set `runner.fidelity` to that:
-    every later simulation of the diagnosis then costs about half (the laser arm). Returns the nominal model's
-    simulations at the fidelity chosen and the coarse one's largest difference in noise units (None: no coarser
-    discretisation, or it diverged)."""
-    if not runner.refinable(SCREEN_FINER):
-        return sims, None
-    coarse = runner.simulate(Model(), finer=SCREEN_FINER)
-    if coarse is None:
-        return sims, None
-    worst = _largest_difference(data, sims, coarse)
-    if worst > COARSE_MARGIN:
-        return sims, worst
-    runner.fidelity = SCREEN_FINER
-    say("nominal", f"the model simulated {SCREEN_FINER:g} x as fine is within {worst:.2f} x the noise of its own on every "
-        f"channel (at most {COARSE_MARGIN:g} x): the diagnosis simulates at that")
-    return coarse, worst
-
-
-def keep_fidelity(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[Recording]:
-    """Where the runner simulates coarser than the rig's model (choose_fidelity) and `model` has effects (called as each
-    finding is taken): simulate it as fine as the rig's model too, and if its coarse `sims` are beyond COARSE_MARGIN x
-    the noise of that on some channel (a dead band or stick-slip can make the coarse model far from its own where the
-    nominal one was not: the laser demo's backlash fitted coarse ends at 2.2 x the noise, as fine at 0.84 x), simulate
-    as fine as the rig's model from now on (the pipeline then carries the finding's fit on there: refine.carry_on).
-    Returns `model`'s simulations at the fidelity kept."""
-    if runner.fidelity == 1.0 or not model.effects:
-        return sims
-    effects = ", ".join(e["effect"] for e in model.effects)
-    say("fidelity", f"checking the model with {effects}, simulated {runner.fidelity:g} x as fine, against its own")
-    (fine, worst), = _as_fine(data, runner, [model], [sims])
-    if worst <= COARSE_MARGIN:
-        return sims
-    runner.fidelity = 1.0
-    say("fidelity", f"with {effects} the model simulated {SCREEN_FINER:g} x as fine is {worst:.2f} x the noise from its own "
-        f"(more than {COARSE_MARGIN:g} x): simulating as fine as the rig's model from now on")
-    return fine
-
-
-def fine_for_round(data: Data, runner: Runner, current: Model, sims: list[Recording], results: list[dict],
-                   say) -> tuple[list[dict], list[Recording]]:
-    """Where the runner simulates coarser than the rig's model: simulate each fitted candidate of a round (`results`,
-    scored as effect_fit.scored) as fine as the rig's model too, and if one is beyond COARSE_MARGIN x the noise of
-    its own, simulate as fine from now on: every candidate's fit carried on there (refine.carry_on) and the current
-    model re-simulated, so that the round compares like with like before it chooses. keep_fidelity checks the
-    winner only; a candidate that the coarse model misjudges may never win (seed 74, laser_arm-366700d8: a 6.9e-5 rad
-    hub backlash keeps the loop hunting at 3.9 Hz, at another phase half as fine; the truth scores 6.0 x the noise
-    half as fine, 3.1 x as fine, and a joint compliance fitted half as fine won at 6.6 x).
-    Returns (the candidates, the current model's simulations) at the fidelity kept."""
-    if runner.fidelity == 1.0 or not results:
-        return results, sims
-    say("fidelity", f"checking the round's {len(results)} candidates, simulated {runner.fidelity:g} x as fine, against their own")
-    checked = _as_fine(data, runner, [r["model"] for r in results], [r["sims"] for r in results])
-    worst, which = max(((w, r) for (_, w), r in zip(checked, results)), key=lambda o: o[0])
-    if worst <= COARSE_MARGIN:
-        return results, sims
-    now = runner.simulate(current, finer=1.0 / runner.fidelity)
-    if now is None:
-        return results, sims
-    runner.fidelity = 1.0
-    say("fidelity", f"{which['effect']} at {which['where']} simulated {SCREEN_FINER:g} x as fine is {worst:.2f} x the noise "
-        f"from its own (more than {COARSE_MARGIN:g} x): simulating as fine as the rig's model from now on, the round's "
-        "candidates carried on there")
-    fine = [k for k, (f, _) in enumerate(checked) if f is not None]
-    carried = dict(zip(fine, carry_on_each(data, runner, [(scored(data, results[k], checked[k][0]), None) for k in fine])))
-    return [carried.get(k, r) for k, r in enumerate(results)], now
-
-
-def _as_fine(data: Data, runner: Runner, models: list[Model], coarse: list[list[Recording]]
-             ) -> list[tuple[list[Recording] | None, float]]:
-    """Each model simulated as fine as the rig's model (one lockstep call), with how far its `coarse` simulations are
-    from that: the largest channel's RMS difference in noise units (0 where the fine simulation diverged)."""
-    fine = runner.simulate_models(models, finer=1.0 / runner.fidelity)
-    return [(f, _largest_difference(data, f, c) if f is not None else 0.0) for f, c in zip(fine, coarse)]
-
-
-def _largest_difference(data: Data, ours: list[Recording], other: list[Recording]) -> float:
-    """The largest RMS difference of two simulations of the recordings over every channel, in units of its noise
-    (scores.channel_ratios with `ours` standing for the measurements)."""
-    return max((r["ratio"] for r in channel_ratios(replace(data, recordings=ours), other)), default=0.0)
-
-
-def raise_coloured_noise(data: Data, sims: list[Recording], say) -> list[str]:
-    """data.add_coloured_noise on the residual of `sims`, the progress told of each floor raised; returns them."""
-    raised = add_coloured_noise(data, sims)
-    if raised:
-        say("noise", "noise correlated over a few samples (a sensor's filter), more than its samples' differences "
-                     f"show: floors raised ({', '.join(raised)})")
-    return raised
-
-
-def calibrate_noise(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> None:
-    """Add to `data` the recordings' noise correlated over a few samples (data.add_coloured_noise, on the residual
-    of `sims`, `model`'s), what the rig's noise leaves in closed loop (`model` simulated with noise on) and, where
-    a finer discretisation exists, what it changes (data.add_closed_loop_noise, add_discretisation_error)."""
-    raise_coloured_noise(data, sims, say)
-    say("noise", "simulating the refit model with the rig's noise on: what noise alone leaves in closed loop")
-    noisy = runner.simulate(model, noise_seed=NOISE_SEED)
-    if noisy is not None:
-        add_closed_loop_noise(data, sims, noisy)
-    if runner.refinable(FINER):
-        say("noise", f"simulating the refit model {FINER} x finer (segments, step): what our own discretisation leaves")
-        finer = runner.simulate(model, finer=FINER)
-        if finer is not None:
-            add_discretisation_error(data, sims, finer)
-
-
-FLOORS = ("noise", "closed_loop_sq", "discretisation_sq", "discretisation")  # the Data fields raise_noise_floor raises
-
-
-def raise_noise_floor(data: Data, runner: Runner, model: Model, sims: list[Recording], say) -> list[str]:
-    """Measure again what the rig's noise leaves in closed loop and what a finer discretisation changes, with `model`
-    (calibrate_noise from the recordings' own noise, `data.sensor_noise`), and raise to it each channel's floor that it
-    exceeds by more than RAISED (its per-sample floors too). The floor was measured with the refit nominal model; a
-    finding that makes the loop hunt or stick can make it far more sensitive to noise and step: seed 75's
-    laser_arm-214f6418, a hub backlash of 1.234e-4 rad in closed loop, raised the tip sensor's floor 12 x (0.0101 to
-    0.1205 V): by the old floor the truth was 6.2 x the noise and a spurious beam damping x6.2 earned its place beside
-    the backlash found (1.28 x); by the new, the truth is 1.03 x and the backlash found 1.27 x. Returns "recording:
-    channel xfactor" of each floor raised."""
-    scratch = replace(data, noise=[dict(n) for n in data.sensor_noise])
-    calibrate_noise(scratch, runner, model, sims, lambda *a: None)
-    raised = []
-    for i, name in enumerate(data.names):
-        for c in data.channels[i]:
-            if scratch.noise[i][c] <= RAISED * data.noise[i][c]:
-                continue
-            raised.append(f"{name}: {c} x{scratch.noise[i][c] / data.noise[i][c]:.2g}")
-            data.noise[i][c] = scratch.noise[i][c]
-            for kind in FLOORS[1:]:  # the per-sample floors and the discretisation part
-                mine, new = getattr(data, kind), getattr(scratch, kind)
-                if new and c in new[i]:
-                    if not mine:
-                        setattr(data, kind, mine := [{} for _ in data.names])
-                    mine[i][c] = np.maximum(mine[i].get(c, 0.0), new[i][c])
-    if raised:
-        say("noise", "with the findings in, noise and step leave more: floors raised (" + ", ".join(raised) + ")")
-    return raised
-
-
-def floors_after_dropping(data: Data, runner: Runner, model: Model, sims: list[Recording], nominal: dict, say) -> None:
-    """Set the floors `model`, left after elimination dropped findings, is judged by: the nominal model's (`nominal`,
-    the FLOORS fields as calibrate_noise left them), raised again by what noise and step leave with the findings kept
-    (raise_noise_floor; none kept: the nominal model's as they were, no simulation). A floor raised by a dropped
-    finding's hunting would otherwise judge the rest by a noise their model does not make."""
-    for name, floor in deepcopy(nominal).items():
-        setattr(data, name, floor)
-    if model.effects:
-        raise_noise_floor(data, runner, model, sims, say)
 
 
 def final_refit(data: Data, runner: Runner, model: Model, sims: list[Recording]) -> tuple[Model, list[Recording], Model]:

@@ -8,7 +8,7 @@ worker processes they are split into one contiguous share per worker, each stepp
 (the batch's Python control half is single-threaded, so processes still pay on 2 cores). Several fits
 running at once (the candidate fits, each in a thread of the main process) put their calls together through
 `Gathered`. Every simulation runs `Runner.fidelity` x as fine as the rig's model (resim.finer_discretisation's
-factor; 1 unless refit.choose_fidelity found a coarser one as good against the noise), and a call's `finer` is
+factor; 1 unless fidelity.choose_fidelity found a coarser one as good against the noise), and a call's `finer` is
 relative to that. A model that diverges gives None, never an exception. Workers ignore Ctrl-C; `Runner` ends them at once
 when the diagnosis is interrupted or fails (interrupts.stop_pool).
 """
@@ -113,7 +113,7 @@ class Runner:
         self.data = data
         self.jobs_done = jobs_done or (lambda done, total: None)  # progress: (jobs done, jobs in this batch)
         self.jobs = 0  # simulation jobs run so far (a job: one recording, or a model's training part)
-        self.fidelity = 1.0  # every simulation this many times as fine as the rig's model (refit.choose_fidelity)
+        self.fidelity = 1.0  # every simulation this many times as fine as the rig's model (fidelity.choose_fidelity)
         self.workers = workers if workers > 1 else 1
         self.memo = Latest(MEMO_BYTES, lambda residual: 0 if residual is None else residual.nbytes)  # see remember
         self.pool = (ProcessPoolExecutor(workers, initializer=worker_init, initargs=(hold, data))  # workers ignore Ctrl-C

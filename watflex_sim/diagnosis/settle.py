@@ -8,7 +8,7 @@ beyond their tolerance are folded into effects first (tolerance.fold_within_tole
 final model does not need it on validation (validate.eliminate) or its intervals include no effect and validation
 without it is not far worse (validate.vague_findings; one at a time, the one validation minds least); what is left is
 refit on the training blocks, from the round's fit of the same findings if there was one, and the floors measured
-again without the dropped (refit.floors_after_dropping) where a finding had raised them. Before it is judged, a model
+again without the dropped (floors.floors_after_dropping) where a finding had raised them. Before it is judged, a model
 short of the noise but near it is carried on by the pattern search on the training blocks (pattern.pattern_polish), and
 one still outside it has its findings' steps and shapes searched again there (refit.levels_on_training). Of
 two or more findings, one that the rest and the rig's parameters carried on by that search explain as well is dropped
@@ -22,9 +22,9 @@ from copy import deepcopy
 import numpy as np
 
 from .data import Data, Model
+from .floors import FLOORS, floors_after_dropping
 from .pattern import COMPASS_REACH, pattern_polish
-from .refit import (FLOORS, final_refit, floors_after_dropping, held_without, levels_on_training, refit_on_training,
-                    without_findings)
+from .refit import final_refit, held_without, levels_on_training, refit_on_training, without_findings
 from .runner import Runner
 from .scores import fit_scores, step
 from .tolerance import fold_within_tolerance
@@ -40,7 +40,7 @@ def settle(data: Data, runner: Runner, current: Model, sims: list, say, *, local
     """(final model, its simulations, intervals, ablated, training scores, validation scores): see the module.
     `refit`: the refit nominal model and its simulations (what is left when no finding stays); `round_models`: each
     round's chosen model by its places (Model.places); `raised`: whether a finding raised the floors, `nominal_floors`
-    the floors before (refit.FLOORS)."""
+    the floors before (floors.FLOORS)."""
     refit_model, refit_sims = refit
     found = len(current.effects)
     current = fold_within_tolerance(data, current)

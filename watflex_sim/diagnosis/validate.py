@@ -1,4 +1,4 @@
-"""Validation: whether a finding earns its place, and the verdict.
+"""Validation: whether a finding earns its place, which to keep, what else fits.
 
 Contract: a fitted candidate is scored by `gains` against the model before it (training and validation noise ratios,
 the share of validation's excess over the noise it removes); it earns its place (`shortfall` says why not) when
@@ -9,13 +9,7 @@ MIN_EXCESS_GAIN of validation's excess without making training worse is enough; 
 above their local null, locate.local_excess, removing LOCAL_GAIN of their excess). `rival` says which other fitted
 candidates are alternatives to the chosen one, `told_apart` which of them the settled model leaves behind.
 `eliminate` drops findings the final model does not need on validation data (or those windows); `vague_findings`
-those the data do not tell from no effect. `verdict_of`: `nothing_missing`
-only when a model without findings is within NOISE_MARGIN x the noise on training AND validation data and no window
-is far above its local null, `explained` when the findings bring both there (or remove EXPLAINED_SHARE of the
-excess, unless the whole is within the noise and one channel stays far above it: `lone_channel`), `unexplained`
-otherwise, and whenever a channel's residual is a static curve of its own value (`characteristic.curved_channels`: a
-nonlinear characteristic the catalogue does not have) or a steady line or drift (disturbance.disturbances);
-`verdict_reason` says why in words.
+those the data do not tell from no effect. The verdict itself: verdict.py.
 """
 from __future__ import annotations
 
@@ -24,10 +18,10 @@ import math
 import numpy as np
 
 from ..recording import Recording
-from .data import DISCRETISATION_COUNT, Data, Model
+from .data import Data, Model
 from .explain import indistinct
 from .fitting import parameter_count
-from .locate import LOCAL_MARGIN, LOCAL_WINDOW_S, local_gain
+from .locate import local_gain
 from .runner import Runner
 from .scores import fit_scores
 from .screening import MIN_GAIN
@@ -40,10 +34,6 @@ NEAR_SHARE = 0.5  # a later effect that removes this share of MIN_EXCESS_GAIN is
 EXCESS_FLOOR = 0.1  # a validation mean within NOISE_MARGIN but this far above the noise still has an excess a later
 # finding can remove (excess_gain); nearer the noise, its excess is too small a divisor (seed 5, below)
 EXPLAINED_SHARE = 0.8  # findings that remove this share of the residual above the noise explain the data
-LONE_CHANNEL = 2.0 * NOISE_MARGIN  # ... unless the whole is within NOISE_MARGIN and one channel stays this far above
-# its noise: the share is of the mean over channels, which one channel hardly moves. Of 87 `explained` reports of
-# seeds 75-81 (and their re-runs) every channel was at most 1.55 x its noise but one: seed 81's laser_arm-493fe444, a
-# motor-current sensor gain x1.82 beside a backlash, read as beam damping, its motor current left at 2.82 x
 ALTERNATIVE_MARGIN = 0.03  # a candidate whose validation noise ratio is within 3 % of the chosen one's: an alternative
 FAR_FROM_NOISE = 20.0  # validation this many times the noise (mean over channels) before a later round: the residual is
 # the model's error, not the recordings' noise (a real rig: the Quanser 2DSFL at 900 x after its refit), and a share of
@@ -97,7 +87,7 @@ def earns_place(result: dict, later: bool) -> bool:
 
 def near_place(result: dict, later: bool) -> bool:
     """Whether a later candidate that does not earn its place falls short only of the excess a later finding must
-    remove, having removed NEAR_SHARE of it (refine.restart_earlier is then tried)."""
+    remove, having removed NEAR_SHARE of it (earlier.restart_earlier is then tried)."""
     if earns_place(result, later) or not later or "local_gain" in result:
         return False
     return earns_place(result, False) and result["excess_gain"] >= NEAR_SHARE * MIN_EXCESS_GAIN
@@ -183,78 +173,6 @@ def within(scores: dict) -> bool:
 def within_noise(scores_train: dict, scores_held: dict) -> bool:
     """Training and validation within NOISE_MARGIN x the noise, on average and on every channel."""
     return within(scores_train) and within(scores_held)
-
-
-def verdict_of(model: Model, train: dict, held: dict, share: float, curved: list[dict], local: list[dict] = (),
-               disturbed: list[dict] = ()) -> str:
-    """The verdict for a final `model` whose fit_scores are `train` and `held` (validation), its findings
-    removing `share` of validation's excess over the noise (explained_share), `curved` its
-    characteristic.curved_channels, `local` the windows far above their local null that asked for a round
-    (locate.local_excess), `disturbed` the channels whose residual carries a steady line or drift no catalogue effect
-    makes (disturbance.disturbances)."""
-    if curved or disturbed:
-        return "unexplained"
-    if not model.effects:
-        return "nothing_missing" if within_noise(train, held) and not local else "unexplained"
-    if within_noise(train, held):
-        return "explained"
-    return "explained" if share >= EXPLAINED_SHARE and not lone_channel(train, held) else "unexplained"
-
-
-def lone_channel(train: dict, held: dict) -> tuple[str, float] | None:
-    """(channel, its ratio to its noise) where training and validation are within NOISE_MARGIN x the noise on the
-    whole (the mean over channels) but that channel stays more than LONE_CHANNEL x its noise on one of them; None
-    otherwise. Such a channel is something the findings do not explain, however much of the mean they removed."""
-    if max(train["noise_ratio"], held["noise_ratio"]) > NOISE_MARGIN:
-        return None
-    worst = max((train, held), key=lambda s: s["worst_ratio"])
-    return (worst["worst_channel"], worst["worst_ratio"]) if worst["worst_ratio"] > LONE_CHANNEL else None
-
-
-def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict], local: list[dict] = (), limit: int | None = None, disturbed: list[dict] = ()) -> str:
-    """Why the verdict, in words; `limit`: the number of findings at which the search stopped without asking whether
-    a further effect would earn its place (max_effects), None where it asked."""
-    stopped = (f"the search stopped at its limit of {limit} finding{'s' if limit != 1 else ''} (--max-effects) before "
-               "asking whether a further effect earns its place")
-    worst = max((train, held), key=lambda s: s["worst_ratio"])
-    now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
-           f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x, our discretisation counted {DISCRETISATION_COUNT:g} x there")
-    if curved:
-        return ("; ".join(f"{c['channel']}'s residual is a static curve of its own value: beyond a gain and an offset "
-                          f"({c['noise_ratio']:.2f} x its noise left), a cubic map takes "
-                          + (f"{100 * c['share']:.0f} % of" if c["share"] < 1.0 else "all of") + " what is above "
-                          f"the noise ({c['with_curve']:.2f} x left; {c['significance']:.0f} x what chance takes): a nonlinear "
-                          "sensor or amplifier characteristic the catalogue "
-                          "does not have" for c in curved)
-                + f" ({now})")
-    if disturbed:
-        from .disturbance import describe  # disturbance measures with effective_samples, from here
-
-        return "; ".join(describe(x) for x in disturbed) + ("" if limit is None else f"; {stopped}") + f" ({now})"
-    if verdict == "unexplained" and local and within_noise(train, held):
-        return (f"within {NOISE_MARGIN:g} x the noise on the whole, but {len(local)} windows of {LOCAL_WINDOW_S:g} s stand "
-                f"more than {LOCAL_MARGIN:g} x above what noise and discretisation leave there: "
-                + "; ".join(f"{w['channel']} in {w['recording']} at {w['t_start']:.2f}-{w['t_end']:.2f} s ({w['regime']}) "
-                            f"{w['ratio']:.1f} x" for w in local[:3])
-                + f"; no catalogue effect removes {100 * LOCAL_GAIN:.0f} % of it ({now})")
-    lone = lone_channel(train, held)
-    if verdict == "unexplained" and lone:
-        return (f"within {NOISE_MARGIN:g} x the noise on the whole, but {lone[0]} stays {lone[1]:.2f} x its noise (more "
-                f"than {LONE_CHANNEL:g} x): " + ("no catalogue effect earns its place there" if limit is None else stopped)
-                + f" ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, {refit_held['noise_ratio']:.2f} x)")
-    if verdict == "nothing_missing":
-        return f"the nominal model, refit within tolerance, is within {NOISE_MARGIN:g} x the noise on every channel: {now}"
-    if verdict == "explained":
-        within = within_noise(train, held)
-        return ((f"the findings bring the model within {NOISE_MARGIN:g} x the noise" if within else
-                 f"the findings remove {100 * share:.0f} % of the validation residual above the noise (at least "
-                 f"{100 * EXPLAINED_SHARE:.0f} % asked); "
-                 + ("what is left no further catalogue effect explains" if limit is None else stopped))
-                + f" ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, {refit_held['noise_ratio']:.2f} x)")
-    return (f"the residual stays above {NOISE_MARGIN:g} x the noise ({now}; refit nominal: {refit_train['noise_ratio']:.2f} x, "
-            f"{refit_held['noise_ratio']:.2f} x) and " + ("no further catalogue effect earns its place" if limit is None else stopped)
-            + ": see 'residual'")
 
 
 def vague_findings(data: Data, model: Model, ranges: dict[int, dict], ablated: list[dict], held: dict,
