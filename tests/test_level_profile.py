@@ -27,6 +27,21 @@ def test_shape_names():
     assert shape_name("position_dependent_friction") == ""
 
 
+def test_a_parameter_the_catalogue_marks_profiled_is_profiled_like_a_shape():
+    """effects.Param.profiled: presliding has no shape (no parameter of it has a neutral value), but its bristle damping
+    sigma1 is profiled (level.levels): the final refit restarts from along its short profile and its interval walks
+    it. Seed 121's watflex-c6b358de (sigma0 9,047 N m/rad, sigma1 19.87 N m s/rad): sigma1 was left at 9.93 by its
+    10.0 start, the interval [6.99, 18.07] missing the truth; profiled, 20.27 [16.2, 25.4] and sigma0 9,004 [8,116,
+    9,959] (measured, `tools/score_benchmark.py` on that case). A joint compliance's stiffness, log-scaled with no
+    neutral too, is not marked: only what the catalogue says is profiled."""
+    from watflex_sim.diagnosis.level import levels
+
+    assert shape_name("presliding") == ""
+    effect = {"effect": "presliding", "where": "elbow", "sigma0": 1e4, "sigma1": 10.0}
+    assert levels(None, effect) == [("sigma1", (0.1, 100.0), 0.0)]  # the catalogue's bounds, no scale
+    assert levels(None, {"effect": "joint_compliance", "where": "elbow", "stiffness": 1e4}) == []
+
+
 def test_a_time_constants_profile_reaches_along_its_valley_where_the_jacobian_cannot():
     """level_reach(): rests of 0.3-0.9 s only (seed 59, watflex-1e32daae: 0.29 / 0.58 s fitted for a gain of 0.51 and
     0.98 s; a fit from 1.13 s ends 0.06 % costlier) leave the gain and the time constant along a curved valley. The

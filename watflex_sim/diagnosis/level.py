@@ -44,10 +44,10 @@ def shape_name(effect: str) -> str:
 
 def levels(data: Data, effect: dict) -> list[tuple[str, tuple[float, float], float]]:
     """The effect's parameters to profile, (name, bounds in the data's units, quantum or 0): its shape parameter
-    (`shape_name`) and its quantised ones."""
+    (`shape_name`), its quantised ones and those the catalogue marks `profiled`."""
     out = []
     for p in CATALOGUE[effect["effect"]][1]:
-        if p.name in effect and (p.quantum or p.name == shape_name(effect["effect"])):
+        if p.name in effect and (p.quantum or p.profiled or p.name == shape_name(effect["effect"])):
             size = scale_of(data, p, effect["where"])
             out.append((p.name, (p.low * size, p.high * size), p.quantum))
     return out
