@@ -1624,7 +1624,7 @@ def _slice_case(cost):
     """slice_reach() on one effect parameter x (bounds 0-10) whose cost is `cost(x)` (0.5 |r|^2, r of
     1,000 white elements so that s^2 is well defined), estimate 5.0 with an interval of [4.9, 5.1]."""
     from watflex_sim.diagnosis.fitting import Slot
-    from watflex_sim.diagnosis.uncertainty import slice_reach
+    from watflex_sim.diagnosis.reach import slice_reach
 
     noise = np.random.default_rng(0).standard_normal(1000)
     noise /= np.sqrt(noise @ noise)
@@ -1659,7 +1659,7 @@ def test_a_slice_follows_a_valley_where_the_others_can_move():
     cost rises by 0.5 x 39.3^2 d^2 only, within the threshold 1.96^2 / 2 s^2 = 1.93 (s^2 ~ 1000 / 998) up to
     d = 0.050: the probes at +-0.04 join, +-0.08 (4.9 more) do not (the profile likelihood's own 95 % interval)."""
     from watflex_sim.diagnosis.fitting import Slot
-    from watflex_sim.diagnosis.uncertainty import slice_reach
+    from watflex_sim.diagnosis.reach import slice_reach
 
     rng = np.random.default_rng(1)
     e = rng.standard_normal(1000)
@@ -2146,7 +2146,7 @@ def test_a_fitted_shape_is_profiled_along_the_valley_its_sizes_make():
 
 
 def test_a_difference_over_a_cliff_is_taken_from_the_gentler_side():
-    """uncertainty.gentler_side(): a one-sided difference that steps over a cliff of the cost (seed 54: a Watflex
+    """reach.gentler_side(): a one-sided difference that steps over a cliff of the cost (seed 54: a Watflex
     dwell-time stiction whose gain +0.15 left the elbow stuck, |dr| 2.3e5 noise units against 390 for -0.15; its 95 %
     interval was +-0.002 around 1.53, the truth 0.60) is replaced by the other side's. Stand-in: the residual, 1,000
     white elements of unit sd, grows as 3 (g - 1.5) below g = 1.6 and jumps by 100 per element above it (and
@@ -2156,7 +2156,7 @@ def test_a_difference_over_a_cliff_is_taken_from_the_gentler_side():
     (3 sqrt 1000) = +-0.021 and at most 1.6 x that (0.029: `intervals` also reaches the Gauss-Newton step to this
     noise's own least-squares minimum). A parameter whose residual has no cliff keeps its forward column."""
     from watflex_sim.diagnosis.fitting import Slot, intervals, jacobian
-    from watflex_sim.diagnosis.uncertainty import gentler_side
+    from watflex_sim.diagnosis.reach import gentler_side
 
     noise = np.random.default_rng(1).standard_normal(1000)
     noise *= np.sqrt(1000) / np.linalg.norm(noise)

@@ -1,5 +1,5 @@
 """An added friction and the rig's friction scale: the split between them as far as our discretisation allows
-(uncertainty.split_reach).
+(reach.split_reach).
 
 Stand-in: the data are a finer model's; the residual is S (total friction - truth's) along one direction a and
 W (added Coulomb - truth's) along another, b: the data fix the total to S and the split only to W. Our model's
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from watflex_sim.diagnosis import Model, Slot
-from watflex_sim.diagnosis.uncertainty import SPLIT_LINE, split_reach
+from watflex_sim.diagnosis.reach import SPLIT_LINE, split_reach
 
 TRUTH = 0.52  # N m: the added Coulomb friction
 K = 5.0  # N m per unit of the friction scale: the rig's own friction level

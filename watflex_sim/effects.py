@@ -66,8 +66,8 @@ class Param:
     # its value, so no wall holds a fit that wants to cross +-pi, and reported within (low, high] (canonical)
     profiled: bool = False  # a log-scaled parameter with no neutral that the final refit also restarts from along
     # its own short profile, and whose 95 % interval walks it, as a shape's (level.levels): Levenberg-Marquardt stops
-    # short in its valley on a rough cost (seed 121, watflex-c6b358de: presliding's bristle damping 19.87 N m s/rad left at
-    # 9.93, its 10.0 start, the staircase's strain 2.3 x its noise there; at 19.87, the rest refit, |r|^2 a third)
+    # short in its valley on a rough cost (seed 121, watflex-c6b358de: presliding's bristle damping 19.87 N m s/rad
+    # left at 9.93, its 10.0 start, the staircase's strain 2.3 x its noise there; at 19.87, the rest refit, |r|^2 a third)
     variants: tuple[float, ...] = ()  # a shape parameter (no neutral) the screening also probes the effect's neutral
     # parameters at (at each of their levels), as these multiples of its start: the signature changes with it beyond
     # what a linear picture follows (a dwell's time constant; a Stribeck velocity: seed 107, a one-way shoulder

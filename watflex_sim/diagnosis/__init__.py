@@ -13,6 +13,7 @@ One module per stage, each with its contract in its docstring:
   fidelity    how fine the diagnosis simulates (half as fine as the rig's model where that is as good)
   floors      the noise floors beyond the recordings' noise: a sensor's filter, closed loop, our discretisation
   screening   candidate effects, their signatures, the screening
+  sensors     which channels a controller feeds back; a sensor effect's signature on one none reads, unsimulated
   selection   which screened candidates a round fits in full (the shortlist), and which first
   rescreen    the best-screening candidates checked by simulation at their linear estimates
   effect_fit  the fit of one candidate effect (a quantised step's search; from a scan's start too)
@@ -29,6 +30,8 @@ One module per stage, each with its contract in its docstring:
   tolerance   rig parameters at and beyond their tolerance; effects that share a rig parameter's knob
   uncertainty 95 % intervals of the final model's parameters (noise, data split, discretisation, rough cost, a
               ripple's period profile)
+  reach       how far an estimate can move before the data tell: a slice, the line to the datasheet's split, a
+              difference from the gentler side of a cliff
   settle      backward elimination, the final refit on all the data and the intervals, until they agree
   locate      where the residual stands out of the noise, in which regime
   explain     findings in the rig's physical terms

@@ -56,7 +56,7 @@ def period_profile(evaluate, model: Model, index: int, slots: list[Slot], J: np.
     """(period, model, profiled cost, its residual) for each period of `periods` where the simulations run: the
     ripple of `model.effects[index]` re-solved as a sin + b cos together with every other slot (J's columns, internal
     units, in `evaluate`'s units), then one Gauss-Newton step more from a simulation there; the cost is that step's
-    linear prediction, 0.5 |r + J d|^2 (as uncertainty.slice_reach profiles), and r + J d its residual.
+    linear prediction, 0.5 |r + J d|^2 (as reach.slice_reach profiles), and r + J d its residual.
     Simulations: one without the ripple, two per period (phase 0 and pi/2 at the estimate's amplitude) and one at
     each solution. `held`: parameters of the ripple's effect held at these values (a spring at its neutral 0);
     `checked`: only the periods whose linear solve leaves the least residual, this many, are simulated there (a scan

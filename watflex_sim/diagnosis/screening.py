@@ -2,7 +2,7 @@
 
 Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings can show
 (`excited`). `signatures` simulates each once per parameter (and probe level) around the current model, half as fine
-as the model (SCREEN_FINER); `screen` scores each by how much of the training residual its signature explains beyond
+as the model (SCREEN_FINER; a sensor's gain or offset on a channel no controller reads unsimulated: sensors.py); `screen` scores each by how much of the training residual its signature explains beyond
 refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate as its
 start; `rescreen.rescreen` checks the best by simulation at that estimate; `selection.shortlist` names the candidates to
 fit in full (effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the datasheet
@@ -18,10 +18,11 @@ from scipy.optimize import lsq_linear
 
 from ..effects import CATALOGUE
 from ..recording import Recording
-from .data import Data, Model, STRIDE
+from .data import Data, Model
 from .fitting import Slot, effect_slots_of, jacobian, value_of
 from .motion import scale_of
 from .runner import evaluator, in_units
+from .sensors import fed_back, sensor_signature
 
 STIFFER_PROBE = -10.0  # x (start - neutral): a `wide` log-scaled ratio (a link's stiffness) is also probed on
 # the other side of neutral (0.9 -> 2.0): a stiffer link than the datasheet's is as likely as a softer one
@@ -180,61 +181,6 @@ def candidates(data: Data, have: list[dict]) -> list[tuple[str, str]]:
             if (effect, where) not in taken and excited(data, effect, where)]
 
 
-class _Reads(dict):
-    """A dict that notes which keys were read (the channels a controller feeds back)."""
-
-    def __init__(self, *args):
-        super().__init__(*args)
-        self.read = set()
-
-    def __getitem__(self, key):
-        self.read.add(key)
-        return super().__getitem__(key)
-
-    def get(self, key, default=None):
-        self.read.add(key)
-        return super().get(key, default)
-
-
-def fed_back(data: Data) -> set[str]:
-    """Channels some recording's controller reads: a sensor effect there changes the motion."""
-    from ..engine import ControlLoop
-    from ..resim import scenario_from_recording
-
-    channels = set()
-    for rec in data.recordings:
-        scenario = scenario_from_recording(rec, data.rig)
-        scenario["duration_s"] = 0.002
-        loop = ControlLoop(scenario, rig=data.rig)
-        with loop:
-            obs = _Reads(loop.rig.observe(loop.references[0]))
-            loop.controller(0.0, obs)
-        channels |= obs.read
-    return channels
-
-
-def _layout(data: Data, sims: list[Recording], channel: str, stride: int = STRIDE) -> tuple[np.ndarray, np.ndarray]:
-    """(entries of the training residual vector that belong to `channel`, simulated value / spread there)."""
-    mask, values = [], []
-    for sim, chans, scale, train in zip(sims, data.channels, data.scale, data.train):
-        idx = np.flatnonzero(train)[::stride]
-        if not idx.size:
-            continue
-        for c in chans:
-            mask.append(np.full(idx.size, c == channel))
-            values.append(np.nan_to_num(sim.channels[c][idx] / scale[c]) if c == channel else np.zeros(idx.size))
-    return np.concatenate(mask), np.concatenate(values)
-
-
-def sensor_signature(data: Data, sims: list[Recording], cand: Candidate) -> dict[str, np.ndarray]:
-    """Signature of a gain or offset on a channel no controller reads, without simulating."""
-    mask, values = _layout(data, sims, cand.where)
-    if cand.effect == "sensor_offset":
-        spread = {c: s for sc in data.scale for c, s in sc.items()}[cand.where]
-        return {"offset": mask / spread}
-    return {"ratio": values}
-
-
 def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.ndarray, cands: list[Candidate],
                per: np.ndarray) -> None:
     """Fill each candidate's signature columns in the units `per` turns spread units into (`data.unit_change`: noise
@@ -245,7 +191,7 @@ def signatures(data: Data, runner, base: Model, sims: list[Recording], r0: np.nd
     jobs, owners = [], []
     for cand in cands:
         if cand.effect in ("sensor_gain", "sensor_offset") and cand.where not in looped:
-            cand.signature = {1.0: {n: v / per for n, v in sensor_signature(data, sims, cand).items()}}
+            cand.signature = {1.0: {n: v / per for n, v in sensor_signature(data, sims, cand.effect, cand.where).items()}}
             continue
         for key, values in cand.probes().items():
             jobs.append(cand.model(base, values))

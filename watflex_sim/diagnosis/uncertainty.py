@@ -1,20 +1,20 @@
 """Uncertainty: 95 % intervals of the final model's parameters, in physical units.
 
-Contract: `final_intervals(data, runner, model, sims)` returns effect index -> parameter -> (low, high),
-every interval within the parameter's bounds. It joins what each source of error would move an estimate by: the
-data's noise (the Jacobian, each effect parameter's column from the gentler side of a cliff, widened for serial
-correlation and for the rig's noise fed back in closed loop: `fitting.intervals`), the split of the data (the
-estimate from the training half alone), our own discretisation (`discretisation_error`, and `fitting.intervals`'
-bound on the bias it can cause) and a cost that stick-slip makes rough or a valley bends (`slice_reach`, a linearised
-profile: the estimate is known only up to where the cost's smooth trend, the other parameters following, rises above
-its roughness), and along a ripple's period, where the cost's valley bends past any Jacobian's reach, a profile
-(period.profile_reach), and along a shape parameter (a time constant, a Stribeck velocity) or a quantised one (a
-delay) theirs (level.level_reach), and the split between the effects and the rig's parameters they act like,
-followed to the datasheet's values as far as the discretisation lets the data prefer it (`split_reach`), and an
-effect size's neutral value where the data are as near the model's noisy realisations with it there
-(`realisation_reach`). Knob-tied pairs (an effect's ratio and the rig parameter turning the same knob) share one
-Jacobian column, and the ratio's interval also spans the datasheet's
-split of their product (`nominal_split`).
+Contract: `final_intervals(data, runner, model, sims)` returns effect index -> parameter -> (low, high), every
+interval within the parameter's bounds. It joins what each source of error would move an estimate by: the data's
+noise (the Jacobian, each effect parameter's column from the gentler side of a cliff (`reach.gentler_side`), widened
+for serial correlation and for the rig's noise fed back in closed loop: `fitting.intervals`), the split of the data
+(the estimate from the training half alone), our own discretisation (`discretisation_error`, and
+`fitting.intervals`' bound on the bias it can cause) and a cost that stick-slip makes rough or a valley bends
+(`reach.slice_reach`, a linearised profile: the estimate is known only up to where the cost's smooth trend, the
+other parameters following, rises above its roughness), and along a ripple's period, where the cost's valley bends
+past any Jacobian's reach, a profile (period.profile_reach), and along a shape parameter (a time constant, a
+Stribeck velocity) or a quantised one (a delay) theirs (level.level_reach), and the split between the effects and
+the rig's parameters they act like, followed to the datasheet's values as far as the discretisation lets the data
+prefer it (`reach.split_reach`), and an effect size's neutral value where the data are as near the model's noisy
+realisations with it there (`realisation_reach`). Knob-tied pairs (an effect's ratio and the rig parameter turning
+the same knob) share one Jacobian column, and the ratio's interval also spans the datasheet's split of their product
+(`nominal_split`).
 """
 from __future__ import annotations
 
@@ -25,11 +25,11 @@ import numpy as np
 from ..effects import CATALOGUE
 from ..recording import Recording
 from .data import Data, Model, residual_vector, unit_change
-from .fitting import (Slot, at_internal, effect_slots_of, fd_step, intervals, jacobian, refit_cost, refit_step, residual_variance,
-                      rig_slots, value_of)
+from .fitting import Slot, effect_slots_of, intervals, jacobian, rig_slots, value_of
 from .level import level_reach, levels
 from .motion import neutral_values
 from .period import neutral_others, periodic_name, profile_reach
+from .reach import gentler_side, slice_reach, split_reach
 from .runner import Runner, evaluator, in_units
 from .tolerance import knob_partner
 
@@ -40,9 +40,6 @@ DISCRETISATION_REACH = 2.0  # x what a FINER x finer model changes in the residu
 # model (a first-order error halves with each doubling, 1 + 1/2 + 1/4 ... = 2)
 REPLICATES = 8  # noise replicates of the final model behind the intervals (seeds NOISE_SEED + 1 ...)
 REPLICATE_SEEDS = tuple(NOISE_SEED + 1 + k for k in range(REPLICATES))
-SLICE_STEPS = (1, 2, 4, 8)  # x an interval's half-width: where slice_reach probes the cost on each side
-SPLIT_STEP = 0.05  # x an effect parameter's value (internal units; a log one: 5 %): split_reach's local columns
-SPLIT_LINE = (0.5, 1.0, 1.5, 2.0)  # x the move to the datasheet's split: where split_reach simulates the model
 
 
 def tolerance_sd(slot: Slot) -> float:
@@ -188,81 +185,6 @@ def widen(out: dict[int, dict], slots: list[Slot], reach: dict[int, tuple[float,
         at[slots[k].name] = (float(min(was[0], low)), float(max(was[1], high)))
 
 
-def split_reach(evaluate, model: Model, slots: list[Slot], n: int, r: np.ndarray, J: np.ndarray,
-                error: np.ndarray | None) -> dict[int, tuple[float, float]]:
-    """Effect slot index (of the first `n` of `slots`; the rest the rig's) -> (low, high): the effect's parameters
-    where the rig's parameters are at the datasheet's values (ratio 1) and the effects re-solved beside them, as far
-    along that line as the data cannot tell it from the estimate once our discretisation is allowed for. An
-    effect and a rig parameter that act alike (a joint's added Coulomb friction and the rig's friction scale) share
-    a valley the fit's split of is set by small differences of shape, which our discretisation changes; the
-    Jacobian, its effect columns wide enough to step over stick-slip, claims the split to a few parts in 10^4.
-    Seed 62, watflex-45eef46f (an elbow Coulomb friction 0.519 / 0.532 N m, the rig at the datasheet): found
-    0.455 / 0.464 beside the friction scale at 1.012, interval [0.447, 0.478]; the move to the datasheet's scale
-    predicted by those columns costs 1,124 (|J d|) in the residual, simulated 154; re-solved with local columns
-    (SPLIT_STEP, central; the rig's are J's, n onwards) the line's end is 0.519 / 0.531, 1,580 cost units above the
-    estimate, and the model 2 x finer favours it by 5,937 of them. A point of the line (SPLIT_LINE x the move, simulated) is kept where its cost
-    less the estimate's, plus what the discretisation `error` (uncertainty.discretisation_error, in r's units) adds
-    to that difference (error . (r_t - r), exact for an error that is the same at both), is within 1.96^2 / 2 s^2;
-    the reach is the furthest point kept, interpolated on toward the next to where that crosses the threshold: there
-    1.45 x the move, 0.547 / 0.558 N m. The furthest, not the first run of points: stick-slip makes the cost along
-    the line rough (seed 61, watflex-4730f348, 0.497 / 1.354 N m for 0.564 / 1.426: the excess +1,604 at half the
-    move, -1,039 and -1,375 at 1 and 1.5 x, +1,259 at 2 x; reach 1.76 x, 0.610 / 1.480 N m)."""
-    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
-    lo = np.array([s.to_internal(s.low) for s in slots])
-    hi = np.array([s.to_internal(s.high) for s in slots])
-    move = np.array([s.to_internal(1.0) for s in slots[n:]]) - u[n:]
-    free = [k for k, s in enumerate(slots[:n]) if s.name != periodic_name(model.effects[s.where[1]])]  # a period: profiled
-    if not free or not np.any(np.abs(move) > 1e-9):
-        return {}
-    h = {k: SPLIT_STEP * (1.0 if slots[k].log else max(abs(u[k]), 1e-3 * slots[k].span())) for k in free}
-    up, down = ([np.where(np.arange(u.size) == k, np.clip(u[k] + sign * h[k], lo[k], hi[k]), u) for k in free] for sign in (1, -1))
-    runs = evaluate([at_internal(x, slots, model) for x in up + down])
-    if any(q is None for q in runs) or any(a[k] == b[k] for k, a, b in zip(free, up, down)):
-        return {}
-    local = np.column_stack([(runs[j] - runs[len(free) + j]) / (up[j][k] - down[j][k]) for j, k in enumerate(free)])
-    line = np.zeros(len(slots))
-    line[free] = refit_step(local, r + J[:, n:] @ move, u[free], lo[free], hi[free])[1]
-    line[n:] = move
-    points = [np.clip(u + t * line, lo, hi) for t in SPLIT_LINE]
-    threshold = 1.96**2 / 2 * residual_variance(r, len(slots))
-    excess = [math.inf if rt is None else 0.5 * float(rt @ rt - r @ r) + (0.0 if error is None else float(error @ (rt - r)))
-              for rt in evaluate([at_internal(x, slots, model) for x in points])]
-    line_t, excess = (0.0, *SPLIT_LINE), [0.0, *excess]
-    last = max(j for j, x in enumerate(excess) if x <= threshold)  # the furthest point kept: the estimate at least
-    reach = line_t[last]
-    if last + 1 < len(excess) and math.isfinite(excess[last + 1]):  # on to where the excess crosses the threshold
-        reach += (line_t[last + 1] - reach) * (threshold - excess[last]) / (excess[last + 1] - excess[last])
-    end = np.clip(u + reach * line, lo, hi)
-    return {k: (slots[k].to_value(min(u[k], end[k])), slots[k].to_value(max(u[k], end[k]))) for k in free} if reach > 0 else {}
-
-
-def gentler_side(evaluate, model: Model, slots: list[Slot], u: np.ndarray, r: np.ndarray, J: np.ndarray, n: int) -> np.ndarray:
-    """J with each of the first `n` columns (the effects' parameters) taken by a step the other way where that
-    changes the residual less: a one-sided difference that steps over a cliff of the cost (a break-away the command
-    no longer overcomes: the joint stays stuck) claims the parameter is known to the width of that cliff's foot.
-    Seed 54, a Watflex dwell-time stiction found at gain 1.53, time constant 1.61 s (truth 0.60, 0.39 s): +0.15 of
-    gain changed the residual by |dr| = 2.3e5 noise units against 390 for -0.15, and the gain's interval was +-0.002.
-    The gentler side bounds how far the estimate can move with the cost within the noise on at least that side.
-    A step the other way that a bound cuts to less than half the forward step's is no side at all: seed 77's
-    two-joint watflex-8da6e87a, a one-way shoulder Coulomb friction whose other side was fitted at 8e-17 N m, stepped
-    back 8e-17 to the bound, saw no change, and its column, so zeroed, gave that side its whole bounds [0, 65.8] N m
-    (0.05 N m there costs 2.3 x the noise)."""
-    if n == 0:
-        return J
-    J, back = J.copy(), []
-    for i in range(n):
-        v = np.array(u, float)
-        v[i] = np.clip(u[i] - fd_step(slots[i], u[i]), slots[i].to_internal(slots[i].low), slots[i].to_internal(slots[i].high))
-        back.append(v)
-    runs = evaluate([at_internal(v, slots, model) for v in back])
-    for i, (v, rv) in enumerate(zip(back, runs)):
-        if rv is not None and abs(v[i] - u[i]) >= 0.5 * abs(fd_step(slots[i], u[i])):
-            column = (rv - r) / (v[i] - u[i])
-            if np.linalg.norm(column) < np.linalg.norm(J[:, i]):
-                J[:, i] = column
-    return J
-
-
 def nominal_split(data: Data, model: Model, slot: Slot, low: float, high: float) -> tuple[float, float]:
     """Interval (low, high) of a knob-tied effect's ratio joined with the same interval moved to the rig
     parameter's nominal value: the data fix the product ratio x e only (tie_knob_columns), so where the fit split
@@ -277,56 +199,6 @@ def nominal_split(data: Data, model: Model, slot: Slot, low: float, high: float)
     return max(min(low, low * e), slot.low), min(max(high, high * e), slot.high)
 
 
-def slice_reach(evaluate, model: Model, slots: list[Slot], i: int, r: np.ndarray, low: float, high: float,
-                J: np.ndarray | None = None) -> tuple[float, float]:
-    """Interval (low, high) of slot i widened to every probe along that slot, SLICE_STEPS x the interval's
-    half-width on each side, whose profiled cost is within a threshold of the lowest seen: 1.96^2 / 2 x s^2
-    (`residual_variance`: what the data's noise resolves), or, where more, 1.96 x the cost's roughness, the
-    RMS departure of the inner probes from a parabola. The profiled cost is 0.5 |r|^2 with every other slot
-    re-optimised to first order within its bounds (`refit_cost` on J's other columns, J in r's units; without
-    J the others are held): a profile likelihood, linearised. On a smooth cost with the estimate at its
-    minimum it adds nothing to the Jacobian's interval; where stick-slip makes the cost rough, a minimum is
-    known only to where the smooth trend rises above the jumps, and a probe that beats the estimate shows
-    the fit stopped short (seed 47, structural damping of link 2 at x14.516, interval [14.513, 14.522]: the
-    cost at 14.49 is 51 lower, with jumps of +-400 between probes 0.01 apart; the truth is 14.48). Along a
-    valley the others follow the probe, where a slice with them held climbs its wall at once: a bend the
-    linear interval cuts short is reached, and the wall's climb is not taken for roughness (seed 55, a Watflex
-    presliding's sigma1: [5.0, 19.3] N m s/rad held, [7.0, 13.8] profiled; truth 11.9).
-    `r`: the residual of `model` in `evaluate`'s units."""
-    slot = slots[i]
-    u = np.array([s.to_internal(value_of(model, s)) for s in slots])
-    lo = np.array([s.to_internal(s.low) for s in slots])
-    hi = np.array([s.to_internal(s.high) for s in slots])
-    others = [j for j in range(len(slots)) if j != i]
-
-    def profiled(q: np.ndarray) -> float:
-        if J is None or not others:
-            return 0.5 * float(q @ q)
-        return 0.5 * refit_cost(J[:, others], q, u[others], lo[others], hi[others])
-
-    bottom, top = lo[i], hi[i]
-    a, b = slot.to_internal(low), slot.to_internal(high)
-    half = max(u[i] - a, b - u[i], 1e-4 * (top - bottom))
-    points = sorted({float(np.clip(u[i] + sign * k * half, bottom, top)) for sign in (-1, 1) for k in SLICE_STEPS} - {float(u[i])})
-    probes = []
-    for x in points:
-        v = u.copy()
-        v[i] = x
-        probes.append(at_internal(v, slots, model))
-    costs = np.array([math.inf if q is None else profiled(q) for q in evaluate(probes)])
-    cost0 = profiled(r)
-    inner = [k for k, x in enumerate(points) if abs(x - u[i]) <= SLICE_STEPS[-2] * half * (1 + 1e-9) and math.isfinite(costs[k])]
-    x = np.array([0.0] + [(points[k] - u[i]) / half for k in inner])
-    c = np.array([cost0] + [costs[k] for k in inner])
-    roughness = 0.0
-    if x.size > 3:
-        departure = c - np.polyval(np.polyfit(x, c, 2), x)
-        roughness = math.sqrt(float(departure @ departure) / (x.size - 3))
-    threshold = min(cost0, float(costs.min(initial=math.inf))) + max(1.96**2 / 2 * residual_variance(r, len(slots)), 1.96 * roughness)
-    kept = [p for p, q in zip(points, costs) if q <= threshold]
-    return slot.to_value(min([a] + kept)), slot.to_value(max([b] + kept))
-
-
 def discretisation_error(data: Data, runner: Runner, model: Model, r: np.ndarray, per: np.ndarray) -> np.ndarray | None:
     """What our own discretisation leaves in the residual `r` of `model` (final_intervals' units: per): DISCRETISATION_REACH
     x the change the model simulated FINER x finer (segments, step) makes at the same parameters; None when the rig
@@ -338,3 +210,4 @@ def discretisation_error(data: Data, runner: Runner, model: Model, r: np.ndarray
         return None
     sims = runner.simulate(model, finer=FINER)
     return None if sims is None else DISCRETISATION_REACH * (residual_vector(data, sims, "all") / per - r)
+
