@@ -664,6 +664,35 @@ def test_a_loop_that_sticks_elsewhere_at_each_hold_is_not_a_curve():
     assert found["significance"] == pytest.approx(4.5, abs=1.0) and found["significance"] < CURVE_SIGNIFICANCE
 
 
+def test_a_curve_within_what_our_discretisation_leaves_is_not_a_characteristic():
+    """curved_channels judges a channel as the verdict does (data.noise_alone: our discretisation error counted
+    DISCRETISATION_COUNT times). Seed 125's two-joint watflex-e75c32f4 (clean, recorded by a finer simulator, the model
+    at 0.81 x the noise): its elbow encoder's residual, 0.95 x the noise with the discretisation counted twice, was a
+    curve of the angle (a step's misfit along the way, 205 x chance) by the floor counting it once and the case was
+    called `unexplained`. In miniature: a critically damped 0.8 rad step, the measurement off along the way by
+    1.6e-3 (u^3 - u) rad (u: the angle over its target; 0.23 mrad RMS), 0.05 mrad white noise, a floor of 0.187 mrad
+    of which 0.18 is our discretisation: a curve at 1.06 x the floor when the floor's make-up is unknown, flagged;
+    0.54 x the floor with the discretisation counted twice (0.363 mrad), not."""
+    from watflex_sim.diagnosis.characteristic import curved_channels
+    from watflex_sim.diagnosis.data import Data
+    from watflex_sim.recording import Recording
+
+    t = np.arange(0.0, 6.0, 1e-3)  # s
+    x = 0.8 * np.where(t < 0.5, 0.0, 1 - np.exp(-(t - 0.5) / 0.4) * (1 + (t - 0.5) / 0.4))  # rad
+    measured = x + 1.6e-3 * ((x / 0.8) ** 3 - x / 0.8) + 0.5e-4 * np.random.default_rng(2).normal(size=t.size)
+    step = 1.8e-4  # rad: what a finer discretisation changes (floors.add_discretisation_error)
+    floor = float(np.hypot(0.5e-4, step))
+
+    def curved(discretisation: list[dict]) -> list[dict]:
+        data = Data([Recording(t, {"c": measured}, {})], ["a"], None, [["c"]], [{"c": 0.5}], [{"c": floor}],
+                    [split_blocks(t)[0]], discretisation=discretisation)
+        return curved_channels(data, [Recording(t, {"c": x}, {})])
+
+    (found,) = curved([])
+    assert found["noise_ratio"] == pytest.approx(1.06, abs=0.03) and found["with_curve"] == pytest.approx(0.27, abs=0.02)
+    assert curved([{"c": step}]) == []
+
+
 def test_a_steady_line_the_simulation_lacks_is_not_explained():
     """disturbance.steady_lines: a strain bridge over three 6 s recordings of a staircase (0.05 V levels every 1.5 s,
     a 2.5 Hz ring after each step) that the model rings at 2.6 Hz (a misfit of ~2 noise sd, 2 mV noise): mains hum of

@@ -267,6 +267,13 @@ def unit_change(data: Data, part: str = "train", stride: int = STRIDE, sims: lis
     return np.concatenate(pieces) if pieces else np.zeros(1)
 
 
+def noise_alone(data: Data, i: int, channel: str) -> float:
+    """The noise (the channel's unit) recording i's `channel` is judged by on its own: its floor with our
+    discretisation error counted DISCRETISATION_COUNT times instead of once."""
+    step = data.discretisation[i].get(channel, 0.0) if data.discretisation else 0.0
+    return float(np.sqrt(data.noise[i][channel] ** 2 + (DISCRETISATION_COUNT**2 - 1.0) * step**2))
+
+
 def rms_residual(rec: Recording, sim: Recording, channel: str, mask: np.ndarray, least: int = 1) -> float | None:
     """RMS of simulated - measured on `channel` over `mask`'s finite samples (the channel's unit); None
     with fewer than `least` of them."""

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..metrics import correlation, nrmse
 from ..recording import Recording
-from .data import DISCRETISATION_COUNT, Data, Model, in_part, rms_residual
+from .data import Data, Model, in_part, noise_alone, rms_residual
 
 def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list[dict]:
     """Per recording and channel: RMS residual / noise rms on a part (1 = within the noise), and (`alone`) / the
@@ -25,9 +25,7 @@ def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list
         for c in chans:
             rms = rms_residual(rec, sim, c, mask, least=10)
             if rms is not None:
-                step = data.discretisation[i].get(c, 0.0) if data.discretisation else 0.0
-                alone = math.sqrt(noise[c] ** 2 + (DISCRETISATION_COUNT**2 - 1.0) * step**2)
-                out.append({"recording": name, "channel": c, "ratio": rms / noise[c], "alone": rms / alone})
+                out.append({"recording": name, "channel": c, "ratio": rms / noise[c], "alone": rms / noise_alone(data, i, c)})
     return out
 
 
