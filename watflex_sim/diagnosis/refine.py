@@ -3,7 +3,8 @@
 Contract: `polish` carries a candidate's fit on (from the refit rig and, given, from the datasheet's values) and
 keeps the better; `offset_alternative` / `single_from_pair` fit an asymmetric Coulomb friction's other form (a
 symmetric friction plus an actuator offset) and back (earlier choices tried again: earlier.py); `alternative_entry`
-describes a candidate within noise of the chosen one for the report. Each returns a result scored like a candidate (effect_fit.scored).
+describes a candidate within noise of the chosen one for the report. Each returns a result scored like a candidate
+(effect_fit.scored).
 """
 from __future__ import annotations
 

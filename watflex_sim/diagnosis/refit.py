@@ -1,17 +1,18 @@
 """Re-simulation and refit: the nominal model on the recordings and the rig's parameters refit within their
 tolerances; a chosen model's parameters refit on all the data.
 
-Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), sets the fidelity every
-later simulation runs at (fidelity.choose_fidelity), refits the rig's parameters within tolerance in the noise
-units the verdict judges (the floors calibrated with the nominal model: floors.calibrate_noise) (Levenberg-Marquardt, then a pattern search where the refit is near the noise but short of it, until training and
-validation are within it) and keeps the refit only if validation is no worse; it returns the nominal and refit
-models' simulations, the rig's live slots and their Jacobian columns (spread units, for the screening and the fits),
-and marks idle parameters in `data.idle`; noise correlated over a few samples (floors.raise_coloured_noise) raises
-the floors from the nominal model's residual before the refit. `final_refit` refits a chosen model's parameters on
-all the data (again from a point further along a shape or quantised parameter where a profile there costs less:
-level.level_start, level.fine_start) and returns it with its simulations and its counterpart fitted on the training
-blocks; `levels_on_training` searches a finding's step or shape again on the training blocks, `refit_on_training`
-and `without_findings` refit a model, or what is left of it, there.
+Contract: `refit_nominal` re-simulates the nominal model (ConfigError if it diverges), sets the fidelity every later
+simulation runs at (fidelity.choose_fidelity), refits the rig's parameters within tolerance in the noise units the
+verdict judges (the floors calibrated with the nominal model: floors.calibrate_noise; Levenberg-Marquardt, then a
+pattern search where the refit is near the noise but short of it, until training and validation are within it) and
+keeps the refit only if validation is no worse; it returns the nominal and refit models' simulations, the rig's live
+slots and their Jacobian columns (spread units, for the screening and the fits), and marks idle parameters in
+`data.idle`; noise correlated over a few samples (floors.raise_coloured_noise) raises the floors from the nominal
+model's residual before the refit. `final_refit` refits a chosen model's parameters on all the data (again from a
+point further along a shape or quantised parameter where a profile there costs less: level.level_start,
+level.fine_start) and returns it with its simulations and its counterpart fitted on the training blocks;
+`levels_on_training` searches a finding's step or shape again on the training blocks, `refit_on_training` and
+`without_findings` refit a model, or what is left of it, there.
 """
 from __future__ import annotations
 

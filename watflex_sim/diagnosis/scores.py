@@ -25,7 +25,8 @@ def channel_ratios(data: Data, sims: list[Recording], part: str = "all") -> list
         for c in chans:
             rms = rms_residual(rec, sim, c, mask, least=10)
             if rms is not None:
-                out.append({"recording": name, "channel": c, "ratio": rms / noise[c], "alone": rms / noise_alone(data, i, c)})
+                out.append({"recording": name, "channel": c, "ratio": rms / noise[c],
+                            "alone": rms / noise_alone(data, i, c)})
     return out
 
 

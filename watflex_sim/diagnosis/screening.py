@@ -2,11 +2,12 @@
 
 Contract: `candidates` lists the (effect, place) pairs the rig description allows that the recordings can show
 (`excited`). `signatures` simulates each once per parameter (and probe level) around the current model, half as fine
-as the model (SCREEN_FINER; a sensor's gain or offset on a channel no controller reads unsimulated: sensors.py); `screen` scores each by how much of the training residual its signature explains beyond
-refitting the rig's parameters and the effects found so far (`with_findings`), and keeps that linear estimate as its
-start; `rescreen.rescreen` checks the best by simulation at that estimate; `selection.shortlist` names the candidates to
-fit in full (effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the datasheet
-model's residual, where the refit took an effect up.
+as the model (SCREEN_FINER; a sensor's gain or offset on a channel no controller reads unsimulated: sensors.py);
+`screen` scores each by how much of the training residual its signature explains beyond refitting the rig's
+parameters and the effects found so far (`with_findings`), and keeps that linear estimate as its start;
+`rescreen.rescreen` checks the best by simulation at that estimate; `selection.shortlist` names the candidates to
+fit in full (effect_fit.fit_candidate), and `concealed` one more: the best by the same signatures against the
+datasheet model's residual, where the refit took an effect up.
 """
 from __future__ import annotations
 
