@@ -1614,10 +1614,11 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
     """discretisation_error() and fitting.intervals' bound on the bias it causes: Watflex elbow steps (+-0.5 rad,
     1.5 s, noise off) recorded with a 0.4 kg tip payload by a 2 x finer discretisation (24 segments a link, 0.25 ms:
     another implementation of the same datasheet). Our model (12 segments, 0.5 ms) fitted to them puts the payload
-    off by its own discretisation's bias, with an interval from the data alone that misses the truth; the bound
-    |b| <= |g| |P e| on the bias of the error e a finer model shows (fitting.intervals) reaches past the truth, and
-    stays an interval worth having (measured: 0.4025 kg, alone [0.4003, 0.4029], widened [0.3874, 0.4158]: +-3.6 %;
-    the same digits with the former bound sd |P e| / s)."""
+    off by its own discretisation's bias, with an interval from the data alone that reaches the truth at its very edge
+    if at all; the bound |b| <= |g| |P e| on the bias of the error e a finer model shows (fitting.intervals) reaches
+    past the truth, and stays an interval worth having (measured: 0.4025 kg, alone [0.3999, 0.4030], widened [0.3866,
+    0.4163]: +-3.7 %; with the damping rule before 2026-12-08, link 2's first mode at 0.0079 (docs/models.md), alone
+    [0.4003, 0.4029] missed it)."""
     from watflex_sim.diagnosis import uncertainty
     from watflex_sim.diagnosis.data import unit_change
     from watflex_sim.diagnosis.floors import add_discretisation_error
@@ -1644,7 +1645,7 @@ def test_a_finer_simulators_data_widen_the_interval_to_its_value(monkeypatch):
         alone = uncertainty.final_intervals(data, runner, ours, sims)[0]["mass"]
     estimate = value_of(ours, slots[0])
     assert abs(estimate - truth) > 2e-3  # kg: what our discretisation costs the estimate
-    assert not alone[0] <= truth <= alone[1]
+    assert truth < alone[0] + 0.1 * (alone[1] - alone[0])  # at its edge, if inside
     assert widened[0] <= truth <= widened[1]
     assert widened[1] - widened[0] < 0.1 * estimate, widened
 

@@ -19,22 +19,35 @@ def _frequencies(beam, f, n_modes: int) -> np.ndarray:
     return lam**2 * math.sqrt(beam.EI / (beam.mass_per_length * beam.length**4))
 
 
-def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3) -> np.ndarray:
-    """First `n_modes` natural frequencies (rad/s) of a clamped-free beam with a tip point mass.
+def clamped_free_frequencies(beam, tip_mass: float, n_modes: int = 3, tip_offset: float = 0.0) -> np.ndarray:
+    """First `n_modes` natural frequencies (rad/s) of a clamped-free beam with a point mass `tip_mass` (kg) on a rigid
+    arm `tip_offset` (m) beyond its free end (0: at the end).
 
-    Frequency equation (e.g. Blevins, *Formulas for natural frequency and mode shape*, table 8-1;
+    Frequency equation at the end (e.g. Blevins, *Formulas for natural frequency and mode shape*, table 8-1;
     Laura et al. 1974): 1 + cos(l) cosh(l) + mu l (cos(l) sinh(l) - sin(l) cosh(l)) = 0 with
     mu = m_tip / (rho L), and omega = l^2 sqrt(EI / (rho L^4)). Rotary inertia of the tip mass
-    is neglected.
+    is neglected. On an arm, the end's conditions from Hamilton's principle with W = w(L) + c w'(L) the mass's
+    deflection: EI w'''(L) = -m omega^2 W, EI w''(L) = m omega^2 c W; with w = A (cos - cosh) + B (sin - sinh) of
+    beta x (clamped root), their 2 x 2 determinant in (A, B) vanishes.
     """
     mu = tip_mass / (beam.mass_per_length * beam.length)
+    gamma = tip_offset / beam.length
 
-    def f(lam, lib):
+    def at_end(lam, lib):
         c, s, ch, sh = lib.cos(lam), lib.sin(lam), lib.cosh(lam), lib.sinh(lam)
         # divided by cosh to keep the function O(1) for large lambda
         return (1.0 + c * ch + mu * lam * (c * sh - s * ch)) / ch
 
-    return _frequencies(beam, f, n_modes)
+    def on_arm(lam, lib):
+        c, s, ch, sh = lib.cos(lam), lib.sin(lam), lib.cosh(lam), lib.sinh(lam)
+        rows = []
+        for u, du, ddu, dddu in ((c - ch, -s - sh, -c - ch, s - sh), (s - sh, c - ch, -s - sh, -c - ch)):
+            mass = u + gamma * lam * du  # W over the amplitude
+            rows.append((dddu + lam * mu * mass, ddu - lam**2 * mu * gamma * mass))
+        (a1, b1), (a2, b2) = rows
+        return (a1 * b2 - a2 * b1) / ch**2
+
+    return _frequencies(beam, on_arm if tip_offset else at_end, n_modes)
 
 
 def tip_deflection(beam, force: float) -> float:

@@ -269,10 +269,12 @@ def own_inertia(stages: list[dict], n: int) -> float:
 
 
 def beam(link: dict, carried: float) -> Beam:
-    """The flexible link as a params.Beam; `carried` (kg) places the first mode for the damping rule."""
+    """The flexible link as a params.Beam; `carried` (kg), at the end of its `tip_clamp`, places the first mode for the
+    damping rule."""
     return Beam(length=link["length"], EI=link["EI"], mass_per_length=link["mass_per_length"],
                 thickness=link.get("thickness", 0.01), height=link.get("height", link.get("width", 0.02)),
-                tip_mass_for_damping=carried, damping_ratio=link.get("damping_ratio", 0.01))
+                tip_mass_for_damping=carried, damping_ratio=link.get("damping_ratio", 0.01),
+                tip_offset_for_damping=link.get("tip_clamp", 0.0))
 
 
 def clamped_modes(b: Beam, n_segments: int, tip_mass: float, n_modes: int = 3) -> np.ndarray:

@@ -29,13 +29,14 @@ class Beam:
     height: float  # m, out of the plane (drawing only)
     tip_mass_for_damping: float  # kg, point mass used to place the first mode for beta [ours]
     damping_ratio: float = 0.01  # rigs.md §1, §2: modal damping ratio 0.01 [choice]
+    tip_offset_for_damping: float = 0.0  # m, that mass's rigid arm beyond the beam's end (Watflex: l1c, l2c)
 
     @property
     def first_mode_rad_s(self) -> float:
-        """Clamped-free first bending mode with `tip_mass_for_damping` at the tip (rad/s)."""
+        """Clamped-free first bending mode with `tip_mass_for_damping` on its arm beyond the tip (rad/s)."""
         from .beam_theory import clamped_free_frequencies
 
-        return clamped_free_frequencies(self, self.tip_mass_for_damping, 1)[0]
+        return clamped_free_frequencies(self, self.tip_mass_for_damping, 1, self.tip_offset_for_damping)[0]
 
     @property
     def damping_beta(self) -> float:
@@ -132,8 +133,9 @@ ALU_E = 70e9  # Pa; rigs.md §2 [choice]
 ALU_DENSITY = 2700.0  # kg/m^3; rigs.md §2 [choice]
 
 
-def _alu_plate(length: float, thickness: float, height: float, tip_mass: float) -> Beam:
-    """Aluminium plate on edge bending in the table plane (EI = E h t^3 / 12)."""
+def _alu_plate(length: float, thickness: float, height: float, tip_mass: float, tip_offset: float) -> Beam:
+    """Aluminium plate on edge bending in the table plane (EI = E h t^3 / 12); `tip_mass` kg `tip_offset` m beyond
+    its end places the first mode for the damping rule."""
     return Beam(
         length=length,
         EI=ALU_E * height * thickness**3 / 12.0,
@@ -141,7 +143,11 @@ def _alu_plate(length: float, thickness: float, height: float, tip_mass: float) 
         thickness=thickness,
         height=height,
         tip_mass_for_damping=tip_mass,
+        tip_offset_for_damping=tip_offset,
     )
+
+
+L1C, L2C = 0.115, 0.083  # m, end clamp of link 1 -> elbow axis, of link 2 -> end-effector centre; rigs.md §2
 
 
 @dataclass(frozen=True)
@@ -150,14 +156,16 @@ class Watflex:
 
     # Geometry, m; rigs.md §2: thesis fig. 2.2 / 3.3 / 5.1
     l1a: float = 0.130  # shoulder axis -> root clamp of link 1 (rigid)
-    l1c: float = 0.115  # end clamp of link 1 -> elbow axis (rigid)
+    l1c: float = L1C  # end clamp of link 1 -> elbow axis (rigid)
     l2a: float = 0.140  # elbow axis -> root clamp of link 2 (rigid)
-    l2c: float = 0.083  # end clamp of link 2 -> end-effector centre (rigid)
+    l2c: float = L2C  # end clamp of link 2 -> end-effector centre (rigid)
     # Links: 6.73 x 38.4 mm and 4.8 x 38.2 mm plates, 470 mm flexible; rigs.md §2.
     # tip_mass_for_damping [ours]: what each link carries at its tip in the elbow experiments
-    # (link 2: the end effector; link 1: elbow actuator + link 2 + end effector).
-    link1: Beam = field(default_factory=lambda: _alu_plate(0.470, 6.73e-3, 38.4e-3, 6.8 + 0.233 + 8.1))
-    link2: Beam = field(default_factory=lambda: _alu_plate(0.470, 4.8e-3, 38.2e-3, 8.1))
+    # (link 2: the end effector; link 1: elbow actuator + link 2 + end effector), where it sits: at the end of the
+    # rigid end clamp (link 2: the end effector's centre, rigs.md §2; link 1: the elbow axis). Since 2026-12-08: the
+    # first mode was placed with the mass at the beam's end, 9.34 rad/s for link 2's 7.34, which put 0.0079 on it
+    link1: Beam = field(default_factory=lambda: _alu_plate(0.470, 6.73e-3, 38.4e-3, 6.8 + 0.233 + 8.1, L1C))
+    link2: Beam = field(default_factory=lambda: _alu_plate(0.470, 4.8e-3, 38.2e-3, 8.1, L2C))
     shoulder: Actuator = field(
         default_factory=lambda: Actuator(50, 13.3, 0.4948, 3.41, 11.8)  # rigs.md §2: tables 4.1, A.1
     )
