@@ -2467,6 +2467,11 @@ def test_a_verdict_reached_at_the_effect_limit_does_not_claim_the_catalogue_was_
     assert "limit of 1 finding (--max-effects)" in stopped and "no further catalogue effect" not in stopped
     explained = verdict_reason("explained", far, far, refit, refit, 0.85, [], limit=2)
     assert "85 %" in explained and "limit of 2 findings" in explained and "no further catalogue effect" not in explained
+    # elimination dropped one of the two (an independent simulator's hidden 2 kg payload: round 1's joint compliance
+    # swapped for a sensor gain, then dropped as vague): the reason says how many were kept
+    one_kept = verdict_reason("explained", far, far, refit, refit, 0.85, [], limit=2, kept=1)
+    assert "(--max-effects; 1 kept, the others dropped since)" in one_kept
+    assert "kept" not in verdict_reason("explained", far, far, refit, refit, 0.85, [], limit=2, kept=2)
     within = {"noise_ratio": 1.0, "worst_ratio": 1.2, "worst_channel": "vir"}  # within the noise: nothing is left to search, the limit is moot
     assert "--max-effects" not in verdict_reason("explained", within, within, refit, refit, 1.0, [], limit=2)
 

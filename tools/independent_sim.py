@@ -67,9 +67,11 @@ class Friction:
     v_s: tuple[float, float] = (1.0, 1.0)
 
     def breakaway(self, side: int) -> float:
+        """N m the joint holds at rest when pushed the positive (side 0) or negative (1) way."""
         return self.alpha0[side] + self.alpha1[side]
 
     def sliding(self, v: float) -> float:
+        """N m against a motion at `v` rad/s."""
         s = 0 if v > 0 else 1
         return self.alpha0[s] + self.alpha1[s] * math.exp(-(v / self.v_s[s]) ** 2) + self.alpha2[s] * abs(v)
 
@@ -189,6 +191,7 @@ class Arm:
 
 
 def quantised(value: float, unit: float) -> float:
+    """`value` rounded to a whole number of `unit`s."""
     return unit * math.floor(value / unit + 0.5)
 
 
@@ -262,6 +265,7 @@ def watflex_run(payload: float, steps: list[tuple[float, float]], duration: floa
 
 
 def _channels(duration: float, names) -> dict[str, np.ndarray]:
+    """Zeroed channels `names` and their times, one sample each PERIOD over `duration` s."""
     ticks = int(round(duration / PERIOD)) + 1
     return {"time": np.arange(ticks) * PERIOD, **{c: np.zeros(ticks) for c in names}}
 

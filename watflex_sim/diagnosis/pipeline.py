@@ -321,7 +321,7 @@ def _diagnose(data: Data, runner: Runner, max_effects: int, screen_top: int, say
         "recordings": data.names,
         "verdict": verdict,
         "verdict_reason": verdict_reason(verdict, train_f, held_f, refit_train, refit_held, share, curved, local, limited,
-                                         disturbed),
+                                         disturbed, len(findings)),
         "mismatch": locate(data, sims_nominal),
         "findings": findings,
         "alternatives": alternatives,

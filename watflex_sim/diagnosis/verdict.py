@@ -47,11 +47,15 @@ def lone_channel(train: dict, held: dict) -> tuple[str, float] | None:
 
 
 def verdict_reason(verdict: str, train: dict, held: dict, refit_train: dict, refit_held: dict, share: float,
-                   curved: list[dict], local: list[dict] = (), limit: int | None = None, disturbed: list[dict] = ()) -> str:
+                   curved: list[dict], local: list[dict] = (), limit: int | None = None, disturbed: list[dict] = (),
+                   kept: int | None = None) -> str:
     """Why the verdict, in words; `limit`: the number of findings at which the search stopped without asking whether
-    a further effect would earn its place (max_effects), None where it asked."""
-    stopped = (f"the search stopped at its limit of {limit} finding{'s' if limit != 1 else ''} (--max-effects) before "
-               "asking whether a further effect earns its place")
+    a further effect would earn its place (max_effects), None where it asked; `kept`: the findings reported, said where
+    elimination left fewer than the limit."""
+    since = (f"; {kept} kept, the others dropped since" if kept is not None and limit is not None and kept < limit
+             else "")
+    stopped = (f"the search stopped at its limit of {limit} finding{'s' if limit != 1 else ''} (--max-effects{since}) "
+               "before asking whether a further effect earns its place")
     worst = max((train, held), key=lambda s: s["worst_ratio"])
     now = (f"training {train['noise_ratio']:.2f} x, validation {held['noise_ratio']:.2f} x the noise; furthest channel "
            f"{worst['worst_channel']} at {worst['worst_ratio']:.2f} x, our discretisation counted {DISCRETISATION_COUNT:g} x there")
