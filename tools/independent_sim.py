@@ -5,7 +5,7 @@ way, written as an outsider would (CSV and a minimal sidecar, by hand).
 Usage: python tools/independent_sim.py laser_arm OUT_DIR [--payload KG ...] [--coulomb POS NEG] [--hidden-payload KG]
                                       [--seed N]
        python tools/independent_sim.py watflex_elbow OUT_DIR [--payload KG ...] [--friction-scale X]
-                                      [--hidden-payload KG] [--seed N]
+                                      [--hidden-payload KG] [--delay MS] [--seed N]
 
 Both: a finite-element Euler-Bernoulli beam (ELEMENTS Hermite cubic elements, w and w' at each node) clamped to a
 rotating hub, small deflection (no centrifugal stiffening), modal damping ratio 0.01 on every clamped-beam mode (the
@@ -236,8 +236,9 @@ NEWTON_METRE_PER_VOLT = 0.4679 * 11.5  # amplifier gain x torque constant
 
 
 def watflex_run(payload: float, steps: list[tuple[float, float]], duration: float, friction_scale: float,
-                seed: int) -> dict[str, np.ndarray]:
-    """The elbow PD on the single-link set-up, reference steps (time s, new value rad); channels each 1 ms."""
+                seed: int, delay_ticks: int = 0) -> dict[str, np.ndarray]:
+    """The elbow PD on the single-link set-up, reference steps (time s, new value rad), each torque command applied
+    `delay_ticks` periods after it was computed (and recorded); channels each 1 ms."""
     rng = np.random.default_rng(seed)
     link = Link(tip_mass=8.1 + payload, **LINK2)
     f = ELBOW_FRICTION
@@ -247,7 +248,7 @@ def watflex_run(payload: float, steps: list[tuple[float, float]], duration: floa
     b, a = butter(2, 10.0, fs=1 / PERIOD)
     state = lfilter_zi(b, a) * 0.0
     out = _channels(duration, ("elbow_reference", "elbow_angle", "elbow_torque_cmd", *GAUGES))
-    before = 0.0
+    before, commands = 0.0, []
     for k, t in enumerate(out["time"]):
         reference = ([0.0] + [v for ts, v in steps if t >= ts - 1e-12])[-1]
         angle = quantised(arm.x[0], encoder)
@@ -260,7 +261,9 @@ def watflex_run(payload: float, steps: list[tuple[float, float]], duration: floa
         for channel, (x, strain_per_volt) in GAUGES.items():
             v = -(THICKNESS / 2) * curvature(link, x, arm.x[:n]) / strain_per_volt + rng.normal(0, 0.002)
             out[channel][k] = min(max(quantised(v, volt), -10.0), 10.0)
-        arm.period(lambda w, torque=torque: (None, torque))
+        commands.append(torque)
+        applied = commands[k - delay_ticks] if k >= delay_ticks else 0.0
+        arm.period(lambda w, applied=applied: (None, applied))
     return out
 
 
@@ -298,13 +301,15 @@ def main(argv=None) -> int:
                         "none, as the nominal model; the source measured 2.778 0.926)")
     parser.add_argument("--friction-scale", type=float, default=1.0, help="Watflex: the elbow friction's levels "
                         "(alpha0, alpha1, alpha2) x this (default 1, the datasheet's)")
+    parser.add_argument("--delay", type=int, default=0, help="Watflex: ms (whole control periods) between a torque "
+                        "command and its reaching the joint (default 0)")
     parser.add_argument("--hidden-payload", type=float, default=0.0, help="kg more at the tip than the sidecars "
                         "declare (default 0): an experimenter's undeclared load")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     args = parser.parse_args(argv)
     payloads = args.payload or ([0.7, 1.15] if args.rig == "laser_arm" else [0.0])
-    if min(payloads) < 0 or min(args.coulomb) < 0 or args.friction_scale < 0 or args.hidden_payload < 0:
-        parser.error("payloads, friction levels and their scale must not be negative")
+    if min(*payloads, *args.coulomb, args.friction_scale, args.hidden_payload, args.delay) < 0:
+        parser.error("payloads, friction levels, their scale and the delay must not be negative")
     for j, declared in enumerate(payloads):
         payload = declared + args.hidden_payload
         if args.rig == "laser_arm":
@@ -314,11 +319,11 @@ def main(argv=None) -> int:
                        "controller": {"type": "pd_tip", "kp": 0.127, "kd": 0.0}}
         else:
             runs = [(f"step_{word}_{declared:g}kg", lambda seed, s=s: watflex_run(payload, [(0.5, s)], 6.0,
-                                                                                args.friction_scale, seed))
+                                                                                args.friction_scale, seed, args.delay))
                     for s, word in ((0.5, "positive"), (-0.5, "negative"))]
             stairs = [(2.0, 0.1), (4.0, 0.2), (6.0, 0.1), (8.0, 0.0)]
             runs.append((f"staircase_{declared:g}kg", lambda seed: watflex_run(payload, stairs, 10.0,
-                                                                              args.friction_scale, seed)))
+                                                                              args.friction_scale, seed, args.delay)))
             sidecar = {"rig": "watflex", "experiment": "watflex_elbow_step", "payload_kg": declared,
                        "locked_joints": {"shoulder": 0.0},
                        "controller": {"type": "pd_joint", "joints": ["elbow"], "kp": [60.0], "kd": [12.0],
