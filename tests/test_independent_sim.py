@@ -22,11 +22,8 @@ _spec = importlib.util.spec_from_file_location("independent_sim", ROOT / "tools"
 ind = sys.modules["independent_sim"] = importlib.util.module_from_spec(_spec)  # its dataclasses look it up
 _spec.loader.exec_module(ind)
 
-LASER_SIDECAR = {"rig": "laser_arm", "experiment": "laser_arm_step", "payload_kg": 0.7,
-         "controller": {"type": "pd_tip", "kp": 0.127, "kd": 0.0}}
-WATFLEX_SIDECAR = {"rig": "watflex", "experiment": "watflex_elbow_step", "payload_kg": 0.0,
-                   "locked_joints": {"shoulder": 0.0},
-           "controller": {"type": "pd_joint", "joints": ["elbow"], "kp": [60.0], "kd": [12.0], "filter_hz": 10.0}}
+LASER_SIDECAR = ind.sidecar("laser_arm", 0.7)
+WATFLEX_SIDECAR = ind.sidecar("watflex_elbow", 0.0)
 
 
 def _nrmse(tmp_path: Path, out: dict, sidecar: dict, effects=()) -> tuple[dict[str, float], object, object]:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.linalg import eigh, expm
-from scipy.signal import butter, lfilter, lfilter_zi
+from scipy.signal import butter, lfilter
 
 PERIOD, SUBSTEP, ELEMENTS, STICK = 1e-3, 5e-5, 12, 2e-4  # s, s, -, rad/s
 ZETA = 0.01  # modal damping ratio of every bending mode; rigs.md sections 1, 2 [choice]
@@ -148,7 +148,7 @@ class Arm:
     the joint's friction."""
 
     def __init__(self, link: Link, friction: Friction | None, emf_damping: float = 0.0, voltage_gain: float = 0.0):
-        self.link, self.friction, self.voltage_gain = link, friction, voltage_gain
+        self.friction, self.voltage_gain = friction, voltage_gain
         self.M, C, K = matrices(link)
         self.n = self.M.shape[0]
         self.driven = discretised(self.M, C, K, emf_damping, voltage_gain)  # a voltage drive with its back-EMF
@@ -246,7 +246,7 @@ def watflex_run(payload: float, steps: list[tuple[float, float]], duration: floa
     arm = Arm(link, friction)
     n, encoder, volt = arm.n, 2 * math.pi / 204800, 20.0 / 4096
     b, a = butter(2, 10.0, fs=1 / PERIOD)
-    state = lfilter_zi(b, a) * 0.0
+    state = np.zeros(len(a) - 1)  # the filter at rest
     out = _channels(duration, ("elbow_reference", "elbow_angle", "elbow_torque_cmd", *GAUGES))
     before, commands = 0.0, []
     for k, t in enumerate(out["time"]):
@@ -273,8 +273,9 @@ def _channels(duration: float, names) -> dict[str, np.ndarray]:
     return {"time": np.arange(ticks) * PERIOD, **{c: np.zeros(ticks) for c in names}}
 
 
-def write(out: dict[str, np.ndarray], directory: Path, name: str, sidecar: dict) -> Path:
-    """NAME.csv and its sidecar (recordings.md section 1) in `directory`; returns the CSV's path."""
+def write(out: dict[str, np.ndarray], directory: Path, name: str, described: dict) -> Path:
+    """NAME.csv and its sidecar, `described` and the format (recordings.md section 1), in `directory`; returns the
+    CSV's path."""
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.csv"
     columns = list(out)
@@ -283,10 +284,20 @@ def write(out: dict[str, np.ndarray], directory: Path, name: str, sidecar: dict)
         writer.writerow(columns)
         for row in zip(*(out[c] for c in columns)):
             writer.writerow([f"{v:.10g}" for v in row])
-    sidecar = {"format": "flexarm-recording/1", **sidecar, "mode": "closed_loop",
-               "notes": "tools/independent_sim.py: a finite-element beam, an independent simulator of rigs.md"}
-    (directory / f"{name}.json").write_text(json.dumps(sidecar, indent=2) + "\n")
+    said = {"format": "flexarm-recording/1", **described, "mode": "closed_loop",
+            "notes": "tools/independent_sim.py: a finite-element beam, an independent simulator of rigs.md"}
+    (directory / f"{name}.json").write_text(json.dumps(said, indent=2) + "\n")
     return path
+
+
+def sidecar(rig: str, payload: float) -> dict:
+    """What a recording of `rig` ("laser_arm" or "watflex_elbow") with `payload` kg declared says of its experiment."""
+    if rig == "laser_arm":
+        return {"rig": "laser_arm", "experiment": "laser_arm_step", "payload_kg": payload,
+                "controller": {"type": "pd_tip", "kp": 0.127, "kd": 0.0}}
+    return {"rig": "watflex", "experiment": "watflex_elbow_step", "payload_kg": payload,
+            "locked_joints": {"shoulder": 0.0},
+            "controller": {"type": "pd_joint", "joints": ["elbow"], "kp": [60.0], "kd": [12.0], "filter_hz": 10.0}}
 
 
 def main(argv=None) -> int:
@@ -315,8 +326,6 @@ def main(argv=None) -> int:
         if args.rig == "laser_arm":
             runs = [(f"step_{word}_{declared:g}kg", lambda seed, d=d: laser_step(payload, d, 2.0, args.coulomb, seed))
                     for d, word in ((1, "positive"), (-1, "negative"))]
-            sidecar = {"rig": "laser_arm", "experiment": "laser_arm_step", "payload_kg": declared,
-                       "controller": {"type": "pd_tip", "kp": 0.127, "kd": 0.0}}
         else:
             runs = [(f"step_{word}_{declared:g}kg", lambda seed, s=s: watflex_run(payload, [(0.5, s)], 6.0,
                                                                                 args.friction_scale, seed, args.delay))
@@ -324,13 +333,9 @@ def main(argv=None) -> int:
             stairs = [(2.0, 0.1), (4.0, 0.2), (6.0, 0.1), (8.0, 0.0)]
             runs.append((f"staircase_{declared:g}kg", lambda seed: watflex_run(payload, stairs, 10.0,
                                                                               args.friction_scale, seed, args.delay)))
-            sidecar = {"rig": "watflex", "experiment": "watflex_elbow_step", "payload_kg": declared,
-                       "locked_joints": {"shoulder": 0.0},
-                       "controller": {"type": "pd_joint", "joints": ["elbow"], "kp": [60.0], "kd": [12.0],
-                                      "filter_hz": 10.0}}
         for i, (name, run) in enumerate(runs):
             out = run(args.seed + 100 * j + i)
-            path = write(out, args.out, name, sidecar)
+            path = write(out, args.out, name, sidecar(args.rig, declared))
             print(f"{path}: {len(out['time'])} samples, last angle "
                   f"{out['hub_angle' if 'hub_angle' in out else 'elbow_angle'][-1]:.5f} rad")
     return 0
